@@ -1,0 +1,40 @@
+"""One source of truth for the paper's geometry (Experimental Settings). Units: metres."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+"""Repository root: holds the user-editable `tasks/`, `assets/` and `agents/` folders."""
+TASKS_DIR = PROJECT_ROOT / "tasks"
+HOLES_DIR = PROJECT_ROOT / "assets" / "holes"
+AGENTS_DIR = PROJECT_ROOT / "agents"
+
+PEG_PROFILES = ("round", "square")
+
+ROUND_PEG_RADIUS = 0.023
+"""Round peg: r = 23 mm."""
+SQUARE_PEG_SIDE = 0.046
+"""Square peg: 46 x 46 mm."""
+PEG_LENGTH = 0.100
+"""Both pegs are 100 mm long, from the flange to the tip."""
+
+DEFAULT_CLEARANCE = 0.004
+"""Hole minus peg, diametral: round hole r = 25 mm, square hole 50 mm (paper: 4 mm)."""
+DEFAULT_HOLE_DEPTH = 0.045
+"""Hole depth in every object (paper: 45 mm)."""
+
+MIN_WALL = 0.003
+"""Thinnest wall left between the hole and the body's side."""
+MIN_FLOOR = 0.003
+"""Thinnest floor left under the hole's bottom."""
+
+
+def peg_half_extent(profile: str) -> float:
+    """Half width of the peg's cross-section (radius for round, half side for square)."""
+    return ROUND_PEG_RADIUS if profile == "round" else SQUARE_PEG_SIDE / 2
+
+
+def hole_half_extent(profile: str, clearance: float) -> float:
+    """Half width of the hole's cross-section: peg + half the diametral clearance."""
+    return peg_half_extent(profile) + clearance / 2

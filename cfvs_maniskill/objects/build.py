@@ -1,0 +1,431 @@
+"""Turn a HoleSpec into simulation geometry: body mesh, hole cut, convex collision parts.
+
+Frames (metres): the body frame has its origin at the centre of the body's bounding box in x
+and y and at its bottom in z, so the body rests on z = 0. The *hole frame* sits at the
+centre of the hole's opening on the top face, axes parallel to the body's: +z points out of
+the hole, the bottom of the hole is at z = -depth. The square hole's sides are parallel to
+the body's x and y axes.
+
+The hole is cut with manifold3d (exact, watertight booleans). The collision shape is CoACD's
+convex decomposition of the cut body, checked so that no part reaches into the hole; both
+are cached on disk under a hash of everything that changes the geometry, so a cached load
+takes milliseconds.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import manifold3d as mf
+import numpy as np
+import trimesh
+
+from cfvs_maniskill.constants import (
+    DEFAULT_CLEARANCE,
+    DEFAULT_HOLE_DEPTH,
+    MIN_FLOOR,
+    MIN_WALL,
+    PEG_LENGTH,
+    hole_half_extent,
+)
+from cfvs_maniskill.objects.spec import HoleSpec, HoleSpecError
+
+log = logging.getLogger(__name__)
+
+BUILD_VERSION = 3
+"""Bump when the geometry code changes, so stale cache entries are not reused."""
+CYLINDER_SEGMENTS = 96
+"""Facets of round bodies and round holes: 1.6 um chord error on a 25 mm hole."""
+COACD_THRESHOLDS = (0.04, 0.02, 0.01)
+"""Concavity thresholds tried in turn until no convex part reaches into the hole."""
+HOLE_CHECK_SHRINK = 0.001
+"""A part may not overlap the hole volume shrunk by this much (1 mm) on every side."""
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("CFVS_CACHE", Path.home() / ".cache" / "cfvs_maniskill")) / "holes"
+
+
+@dataclass
+class HoleGeometry:
+    """Everything the simulator needs for one (spec, peg profile, clearance, depth)."""
+
+    name: str
+    profile: str
+    clearance: float
+    depth: float
+    visual_vertices: np.ndarray  # (V, 3) float32, body frame, metres
+    visual_faces: np.ndarray  # (F, 3) int32
+    collision_parts: list[tuple[np.ndarray, np.ndarray]]  # convex (vertices, faces) pairs
+    hole_frame: np.ndarray  # (3,) position of the hole frame's origin in the body frame
+    body_height: float
+    cache_key: str
+
+    @property
+    def hole_half_extent(self) -> float:
+        return hole_half_extent(self.profile, self.clearance)
+
+    def visual_trimesh(self) -> trimesh.Trimesh:
+        return trimesh.Trimesh(self.visual_vertices, self.visual_faces, process=False)
+
+
+# --------------------------------------------------------------------------------------------
+# manifold helpers
+# --------------------------------------------------------------------------------------------
+
+
+def _to_manifold(vertices: np.ndarray, faces: np.ndarray) -> mf.Manifold:
+    mesh = mf.Mesh(
+        vert_properties=np.ascontiguousarray(vertices, dtype=np.float32),
+        tri_verts=np.ascontiguousarray(faces, dtype=np.uint32),
+    )
+    return mf.Manifold(mesh)
+
+
+def _from_manifold(m: mf.Manifold) -> tuple[np.ndarray, np.ndarray]:
+    mesh = m.to_mesh()
+    return (
+        np.asarray(mesh.vert_properties, dtype=np.float32)[:, :3].copy(),
+        np.asarray(mesh.tri_verts, dtype=np.int32).copy(),
+    )
+
+
+def hole_solid(profile: str, half: float, z0: float, z1: float, at: tuple[float, float]):
+    """The hole's volume (a square box or a cylinder) from z0 to z1 at (x, y) = at."""
+    h = z1 - z0
+    if half <= 0 or h <= 0:
+        return mf.Manifold()
+    if profile == "square":
+        s = mf.Manifold.cube([2 * half, 2 * half, h], True)
+    else:
+        s = mf.Manifold.cylinder(h, half, half, CYLINDER_SEGMENTS, True)
+    return s.translate([at[0], at[1], (z0 + z1) / 2])
+
+
+# --------------------------------------------------------------------------------------------
+# body
+# --------------------------------------------------------------------------------------------
+
+
+def _body_field(spec: HoleSpec) -> str:
+    return {
+        "box": "body.box.size",
+        "cylinder": "body.cylinder",
+        "prism": "body.prism",
+        "mesh": "body.mesh.file",
+    }[spec.body_kind]
+
+
+def _load_mesh_body(spec: HoleSpec) -> mf.Manifold:
+    path = spec.mesh_file
+    fld = "body.mesh.file"
+    try:
+        loaded = trimesh.load(path, force="mesh", process=True)
+    except Exception as e:  # trimesh raises many types for bad files
+        raise HoleSpecError(spec.source, fld, f"cannot read mesh {path}: {e}") from e
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise HoleSpecError(spec.source, fld, f"mesh {path} has no triangles")
+    mesh = loaded
+    mesh.apply_scale(spec.body["scale"])
+    if not mesh.is_watertight:
+        raise HoleSpecError(
+            spec.source,
+            fld,
+            f"mesh {path} is not watertight (it has open edges), so it has no inside to cut "
+            "the hole from; expected a closed surface",
+        )
+    if mesh.volume <= 1e-9:
+        raise HoleSpecError(
+            spec.source, fld, f"mesh {path} is degenerate (volume {mesh.volume:.3g} m^3)"
+        )
+    if not mesh.is_volume:
+        mesh.fix_normals()
+    lo, hi = mesh.bounds
+    mesh.apply_translation([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]])
+    m = _to_manifold(mesh.vertices, mesh.faces)
+    if m.status() != mf.Error.NoError or m.is_empty():
+        raise HoleSpecError(
+            spec.source, fld, f"mesh {path} is not a valid closed 2-manifold ({m.status()})"
+        )
+    return m
+
+
+def body_solid(spec: HoleSpec) -> mf.Manifold:
+    """The body without the hole, in the body frame (bottom at z = 0, centred in x, y)."""
+    b = spec.body
+    if spec.body_kind == "box":
+        sx, sy, sz = b["size"]
+        return mf.Manifold.cube([sx, sy, sz], True).translate([0, 0, sz / 2])
+    if spec.body_kind == "cylinder":
+        return mf.Manifold.cylinder(b["height"], b["radius"], b["radius"], CYLINDER_SEGMENTS)
+    if spec.body_kind == "prism":
+        # Regular polygon with circumradius `radius`; rotated so that one side faces +x.
+        p = mf.Manifold.cylinder(b["height"], b["radius"], b["radius"], b["sides"])
+        v = np.asarray(p.to_mesh().vert_properties)[:, :2]
+        ang0 = np.arctan2(v[:, 1], v[:, 0]).min()
+        p = p.rotate([0, 0, float(np.degrees(np.pi / b["sides"] - ang0))])
+        lo, hi = p.bounding_box()[:3], p.bounding_box()[3:]
+        return p.translate([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, 0])
+    return _load_mesh_body(spec)
+
+
+def _surface_z(body: mf.Manifold, at: tuple[float, float]) -> tuple[float, float] | None:
+    """(z where a ray down through `at` enters the body, z where it first leaves it)."""
+    v, f = _from_manifold(body)
+    tri = v[f].astype(np.float64)  # (F, 3, 3)
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    # Barycentric coordinates of (x, y) in each triangle's projection on the xy plane.
+    d = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
+    ok = np.abs(d) > 1e-15
+    d = np.where(ok, d, 1.0)
+    px, py = at
+    l1 = ((b[:, 1] - c[:, 1]) * (px - c[:, 0]) + (c[:, 0] - b[:, 0]) * (py - c[:, 1])) / d
+    l2 = ((c[:, 1] - a[:, 1]) * (px - c[:, 0]) + (a[:, 0] - c[:, 0]) * (py - c[:, 1])) / d
+    l3 = 1 - l1 - l2
+    eps = -1e-9
+    hit = ok & (l1 >= eps) & (l2 >= eps) & (l3 >= eps)
+    if not hit.any():
+        return None
+    zs = np.unique(np.round((l1 * a[:, 2] + l2 * b[:, 2] + l3 * c[:, 2])[hit], 7))[::-1]
+    if len(zs) < 2:
+        return None
+    return float(zs[0]), float(zs[1])
+
+
+def _contained(body: mf.Manifold, solid: mf.Manifold) -> bool:
+    vol = solid.volume()
+    return vol > 0 and (solid ^ body).volume() >= vol * (1 - 1e-6)
+
+
+def check_room(spec: HoleSpec, body: mf.Manifold, profile: str, clearance: float, depth: float):
+    """Raise HoleSpecError unless the body can host the hole; returns the hole-frame origin."""
+    fld = _body_field(spec)
+    at = spec.hole_at
+    z = _surface_z(body, at)
+    if z is None:
+        raise HoleSpecError(
+            spec.source,
+            "hole_at",
+            f"{list(at)} is not over the body's top face; expected a point within the body's "
+            "footprint (metres from its centre)",
+        )
+    z_top, z_exit = z
+    need = depth + MIN_FLOOR
+    if z_top - z_exit < need - 1e-9:
+        raise HoleSpecError(
+            spec.source,
+            fld,
+            f"body is {1000 * (z_top - z_exit):.1f} mm thick under the hole but the hole needs "
+            f"{1000 * depth:.1f} mm depth + {1000 * MIN_FLOOR:.1f} mm floor: "
+            f"{1000 * (need - (z_top - z_exit)):.1f} mm missing (hole deeper than the body)",
+        )
+    half = hole_half_extent(profile, clearance)
+
+    def fits(margin: float) -> bool:
+        return _contained(
+            body, hole_solid(profile, half + margin, z_top - depth - MIN_FLOOR, z_top - 1e-4, at)
+        )
+
+    if not fits(MIN_WALL):
+        lo, hi = -half, MIN_WALL  # bisection for the widest wall the body leaves
+        for _ in range(16):
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+        wall = lo
+        width = 2 * (half + MIN_WALL)
+        raise HoleSpecError(
+            spec.source,
+            fld,
+            f"body too small for the {profile} hole ({1000 * 2 * half:.1f} mm wide) at hole_at "
+            f"{list(at)}: it needs {1000 * width:.1f} mm of top face (a {1000 * MIN_WALL:.1f} mm "
+            f"wall all round) but leaves a wall of {1000 * max(wall, 0):.1f} mm: "
+            f"{1000 * (MIN_WALL - wall):.1f} mm missing",
+        )
+    return np.array([at[0], at[1], z_top])
+
+
+# --------------------------------------------------------------------------------------------
+# collision
+# --------------------------------------------------------------------------------------------
+
+
+def parts_in_hole(parts, hole_origin, profile, half, depth) -> list[int]:
+    """Indices of convex parts that overlap the hole volume shrunk by HOLE_CHECK_SHRINK."""
+    probe = hole_solid(
+        profile,
+        half - HOLE_CHECK_SHRINK,
+        hole_origin[2] - depth + HOLE_CHECK_SHRINK,
+        hole_origin[2] + PEG_LENGTH,  # also nothing above the opening
+        (hole_origin[0], hole_origin[1]),
+    )
+    bad = []
+    for i, (v, _) in enumerate(parts):
+        hull = mf.Manifold.hull_points(np.asarray(v, dtype=np.float32))
+        if (hull ^ probe).volume() > 1e-9:
+            bad.append(i)
+    return bad
+
+
+def hole_sectors(profile: str, half: float, clearance: float) -> np.ndarray:
+    """Angles (radians) of the planes through the hole axis that cut the body into wedges.
+
+    Square hole: the four diagonals, so each wedge holds one flat hole wall and is convex
+    where the hole is. Round hole: enough wedges that the chord of each wedge's arc sits at
+    most min(0.5 mm, clearance / 8) inside the hole wall, so the hull of a wedge cannot
+    shrink the hole by more than that.
+    """
+    if profile == "square":
+        return np.pi / 4 + np.arange(4) * np.pi / 2
+    sagitta = min(0.0005, clearance / 8)
+    n = int(np.ceil(np.pi / np.arccos(1 - sagitta / half)))
+    return np.arange(max(n, 8)) * 2 * np.pi / max(n, 8)
+
+
+def _pieces(cut: mf.Manifold, origin: np.ndarray, depth: float, angles: np.ndarray):
+    """The floor slab under the hole, and the body around the hole cut into wedges."""
+    # Split 10 um above the hole's floor: a split exactly at the floor leaves zero-thickness
+    # slivers of it in the wedges, whose hulls would then reach the hole's axis.
+    z_bottom = float(origin[2] - depth) + 1e-5
+    upper = cut.trim_by_plane([0, 0, 1], z_bottom)
+    yield cut.trim_by_plane([0, 0, -1], -z_bottom)
+    c = origin[:2]
+    for a, b in zip(angles, np.roll(angles, -1), strict=True):
+        n_a = np.array([-np.sin(a), np.cos(a)])  # keeps the side counter-clockwise of ray a
+        n_b = np.array([np.sin(b), -np.cos(b)])  # keeps the side clockwise of ray b
+        w = upper.trim_by_plane([*n_a, 0], float(n_a @ c)).trim_by_plane([*n_b, 0], float(n_b @ c))
+        yield w
+
+
+def convex_decomposition(cut: mf.Manifold, origin, profile, half, clearance, depth, source: Path):
+    """CoACD on each wedge of the cut body; wedges keep every hull out of the hole.
+
+    Plain CoACD on a whole body with a round hole took 60-130 s and gave 200-400 parts (its
+    concavity threshold cannot tell a hole wall from the rest). Cut into wedges, a primitive
+    body needs no CoACD at all (each wedge is its own hull) and a mesh body is fast.
+    """
+    import coacd
+
+    coacd.set_log_level("error")
+    parts: list[tuple[np.ndarray, np.ndarray]] = []
+    for piece in _pieces(cut, origin, depth, hole_sectors(profile, half, clearance)):
+        if piece.is_empty() or piece.volume() < 1e-10:
+            continue
+        v, f = _from_manifold(piece)
+        hull = piece.hull()
+        # A wedge of a convex body is convex up to the arc of the hole wall: its hull is
+        # the decomposition. CoACD is only run on pieces that are really concave.
+        if hull.volume() <= piece.volume() * 1.01:
+            got = [_from_manifold(hull)]
+            if not parts_in_hole(got, origin, profile, half, depth):
+                parts += got
+                continue
+        mesh = coacd.Mesh(v.astype(np.float64), f.astype(np.int64))
+        for threshold in COACD_THRESHOLDS:
+            raw = coacd.run_coacd(mesh, threshold=threshold, preprocess_mode="off", seed=0)
+            got = [(np.asarray(pv, np.float32), np.asarray(pf, np.int32)) for pv, pf in raw]
+            if not parts_in_hole(got, origin, profile, half, depth):
+                parts += got
+                break
+        else:
+            raise HoleSpecError(
+                source,
+                "body",
+                "the convex decomposition keeps reaching into the hole even at CoACD "
+                f"threshold {COACD_THRESHOLDS[-1]}; simplify the body around the hole",
+            )
+    return parts
+
+
+# --------------------------------------------------------------------------------------------
+# entry point
+# --------------------------------------------------------------------------------------------
+
+
+def geometry_key(spec: HoleSpec, profile: str, clearance: float, depth: float) -> str:
+    payload = {
+        "v": BUILD_VERSION,
+        "kind": spec.body_kind,
+        "body": spec.body,
+        "hole_at": spec.hole_at,
+        "profile": profile,
+        "clearance": round(clearance, 9),
+        "depth": round(depth, 9),
+    }
+    if spec.mesh_file is not None:
+        payload["mesh_sha"] = hashlib.sha256(spec.mesh_file.read_bytes()).hexdigest()
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:20]
+
+
+def _load_cached(path: Path, spec: HoleSpec, profile, clearance, depth, key) -> HoleGeometry:
+    with np.load(path) as z:
+        n = int(z["n_parts"])
+        parts = [(z[f"part{i}_v"], z[f"part{i}_f"]) for i in range(n)]
+        return HoleGeometry(
+            name=spec.name,
+            profile=profile,
+            clearance=clearance,
+            depth=depth,
+            visual_vertices=z["visual_v"],
+            visual_faces=z["visual_f"],
+            collision_parts=parts,
+            hole_frame=z["hole_frame"],
+            body_height=float(z["body_height"]),
+            cache_key=key,
+        )
+
+
+def build_geometry(
+    spec: HoleSpec,
+    profile: str,
+    clearance: float = DEFAULT_CLEARANCE,
+    depth: float = DEFAULT_HOLE_DEPTH,
+    use_cache: bool = True,
+) -> HoleGeometry:
+    """Cut the hole for `profile` into the body and decompose it (cached on disk)."""
+    if profile not in spec.hole:
+        raise HoleSpecError(
+            spec.source,
+            "hole",
+            f"this object hosts {list(spec.hole)} pegs, not a {profile} peg; "
+            f"add '{profile}' to its hole list or pick another object",
+        )
+    if clearance <= 0 or depth <= 0:
+        raise ValueError(f"clearance and depth must be > 0 (got {clearance}, {depth})")
+    key = geometry_key(spec, profile, clearance, depth)
+    path = cache_dir() / f"{key}.npz"
+    if use_cache and path.is_file():
+        try:
+            return _load_cached(path, spec, profile, clearance, depth, key)
+        except (OSError, KeyError, ValueError) as e:  # torn or stale file: rebuild it
+            log.warning("ignoring unreadable cache file %s (%s)", path, e)
+
+    body = body_solid(spec)
+    origin = check_room(spec, body, profile, clearance, depth)
+    half = hole_half_extent(profile, clearance)
+    cut = body - hole_solid(profile, half, origin[2] - depth, origin[2] + 1.0, spec.hole_at)
+    v, f = _from_manifold(cut)
+    parts = convex_decomposition(cut, origin, profile, half, clearance, depth, spec.source)
+    height = float(v[:, 2].max())
+
+    arrays = {"visual_v": v, "visual_f": f, "hole_frame": origin, "body_height": height}
+    arrays["n_parts"] = np.array(len(parts))
+    for i, (pv, pf) in enumerate(parts):
+        arrays[f"part{i}_v"], arrays[f"part{i}_f"] = pv, pf
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # Write to a temp file and rename: a crash never leaves a half-written cache entry.
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.npz")
+    os.close(fd)
+    try:
+        np.savez(tmp, **arrays)
+        shutil.move(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return HoleGeometry(spec.name, profile, clearance, depth, v, f, parts, origin, height, key)

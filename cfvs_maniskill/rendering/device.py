@@ -1,0 +1,108 @@
+"""Pick the Vulkan device SAPIEN renders with, before SAPIEN is first used.
+
+SAPIEN renders through Vulkan and needs `VK_KHR_external_semaphore_fd`, which Mesa's
+lavapipe lacks; SwiftShader (shipped in Debian's chromium packages) has it. On a machine
+with a GPU render node we leave Vulkan alone so the real GPU is used. Otherwise we point the
+Vulkan loader at a SwiftShader ICD, so nobody has to export variables by hand.
+
+Environment overrides:
+  CFVS_RENDER_DEVICE=gpu|swiftshader   force the choice.
+  CFVS_SWIFTSHADER_ICD=/path/vk_swiftshader_icd.json   use this ICD file.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import sys
+from pathlib import Path
+
+SWIFTSHADER_BACKEND = "swiftshader"
+"""Name we register in ManiSkill's render-backend table for the SwiftShader device."""
+
+_ICD_NAME = "vk_swiftshader_icd.json"
+_state: dict[str, str] = {}
+
+
+class RenderDeviceError(RuntimeError):
+    """No Vulkan device SAPIEN can render with."""
+
+
+def _has_gpu_node() -> bool:
+    return bool(glob.glob("/dev/nvidia[0-9]*") or glob.glob("/dev/dri/renderD*"))
+
+
+def swiftshader_icd_candidates() -> list[Path]:
+    """Where the set-up command and Debian's chromium packages put the SwiftShader ICD."""
+    out = []
+    if os.environ.get("CFVS_SWIFTSHADER_ICD"):
+        out.append(Path(os.environ["CFVS_SWIFTSHADER_ICD"]))
+    out += [
+        Path(sys.prefix) / "share" / "cfvs_maniskill" / "swiftshader" / _ICD_NAME,
+        Path.home() / ".cache" / "cfvs_maniskill" / "swiftshader" / _ICD_NAME,
+        Path("/usr/lib/chromium") / _ICD_NAME,
+    ]
+    return out
+
+
+def configure() -> str:
+    """Choose the device once per process; returns "gpu", "swiftshader" or "missing".
+
+    Must run before SAPIEN creates its render system. Child processes inherit the
+    environment variable we set, so workers need no extra step.
+    """
+    if "kind" in _state:
+        return _state["kind"]
+    forced = os.environ.get("CFVS_RENDER_DEVICE", "").lower()
+    if os.environ.get("VK_ICD_FILENAMES") and forced != "gpu":
+        icd = os.environ["VK_ICD_FILENAMES"]
+        kind = SWIFTSHADER_BACKEND if "swiftshader" in icd.lower() else "gpu"
+        _state.update(kind=kind, icd=icd)
+    elif forced == "gpu" or (forced != SWIFTSHADER_BACKEND and _has_gpu_node()):
+        _state.update(kind="gpu")
+    else:
+        icd_path = next((p for p in swiftshader_icd_candidates() if p.is_file()), None)
+        if icd_path is None:
+            _state.update(kind="missing")
+        else:
+            os.environ["VK_ICD_FILENAMES"] = str(icd_path)
+            _state.update(kind=SWIFTSHADER_BACKEND, icd=str(icd_path))
+    if _state["kind"] == SWIFTSHADER_BACKEND:
+        _register_maniskill_backend()
+    return _state["kind"]
+
+
+def _register_maniskill_backend() -> None:
+    # ManiSkill splits a backend string on ':', so "pci:0" cannot be passed directly; a
+    # name mapped to it survives the split. SwiftShader is the only device, i.e. pci:0.
+    import mani_skill.envs.utils.system.backend as backend
+
+    backend.render_backend_name_mapping[SWIFTSHADER_BACKEND] = "pci:0"
+
+
+def render_backend() -> str:
+    """The `render_backend` argument for ManiSkill envs on this machine."""
+    kind = configure()
+    if kind == "missing":
+        raise RenderDeviceError(missing_message())
+    return SWIFTSHADER_BACKEND if kind == SWIFTSHADER_BACKEND else "gpu"
+
+
+def missing_message() -> str:
+    tried = "\n  ".join(str(p) for p in swiftshader_icd_candidates())
+    return (
+        "No Vulkan device for SAPIEN's renderer: no GPU render node (/dev/dri/renderD*, "
+        "/dev/nvidia*) and no SwiftShader ICD found. Looked for:\n  "
+        f"{tried}\nRun `bash scripts/setup.sh` (it extracts SwiftShader from Debian's "
+        "chromium-common package), or `apt-get install chromium`, or set "
+        "CFVS_SWIFTSHADER_ICD to a vk_swiftshader_icd.json."
+    )
+
+
+def describe() -> str:
+    kind = configure()
+    if kind == SWIFTSHADER_BACKEND:
+        return f"rendering on SwiftShader (CPU Vulkan, {_state['icd']})"
+    if kind == "gpu":
+        return "rendering on the system's Vulkan GPU driver"
+    return "no rendering device found: " + missing_message()

@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# One-time (idempotent) set-up of cfvs_maniskill on a Debian 12 machine as root:
+#   - system libraries SAPIEN's renderer needs (libx11-6),
+#   - a Python 3.11 virtual environment in .venv with the package (editable) and its pins,
+#   - SwiftShader (a CPU Vulkan driver) taken out of Debian's chromium-common .deb, used by
+#     the package only when no GPU is present.
+# A second run takes seconds: every step checks first whether it is already done.
+set -euo pipefail
+cd "$(dirname "$(readlink -f "$0")")/.."
+ROOT=$PWD
+VENV=$ROOT/.venv
+SWIFTSHADER_DIR=$VENV/share/cfvs_maniskill/swiftshader
+
+log() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
+
+apt_ready=0
+need_apt() {
+  if [ "$apt_ready" = 0 ]; then
+    command -v apt-get >/dev/null || { echo "apt-get not found: install $* by hand" >&2; exit 1; }
+    log "apt-get update"
+    apt-get update -qq
+    apt_ready=1
+  fi
+}
+
+# 1. System libraries (only what is missing).
+missing=()
+ldconfig -p | grep -q 'libX11.so.6' || missing+=(libx11-6)
+python3.11 -m venv --help >/dev/null 2>&1 || missing+=(python3.11-venv)
+command -v python3.11 >/dev/null || missing+=(python3.11)
+if [ ${#missing[@]} -gt 0 ]; then
+  need_apt "${missing[@]}"
+  log "installing ${missing[*]}"
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+# 2. Virtual environment + package. Re-installed only when pyproject.toml changes.
+if [ ! -x "$VENV/bin/python" ]; then
+  log "creating $VENV"
+  python3.11 -m venv "$VENV"
+fi
+stamp=$VENV/.cfvs_installed
+want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  log "installing the package and its pinned dependencies (first run: a few minutes)"
+  # torch first, pinned: pip then never pulls the multi-GB CUDA build as a dependency.
+  "$VENV/bin/pip" install -q "torch==2.13.0"
+  "$VENV/bin/pip" install -q -e ".[dev]"
+  echo "$want" > "$stamp"
+fi
+
+# 3. SwiftShader Vulkan ICD (5 MB), unless a GPU render node exists or it is already here.
+if [ ! -f "$SWIFTSHADER_DIR/vk_swiftshader_icd.json" ]; then
+  if ls /dev/nvidia0 /dev/dri/renderD* >/dev/null 2>&1; then
+    log "GPU render node found: SwiftShader not needed"
+  else
+    need_apt chromium-common
+    tmp=$(mktemp -d)
+    log "fetching SwiftShader from Debian's chromium-common package"
+    (cd "$tmp" && apt-get download -qq chromium-common >/dev/null && dpkg -x chromium-common_*.deb x)
+    mkdir -p "$SWIFTSHADER_DIR"
+    cp "$tmp/x/usr/lib/chromium/libvk_swiftshader.so" "$tmp/x/usr/lib/chromium/vk_swiftshader_icd.json" "$SWIFTSHADER_DIR/"
+    rm -rf "$tmp"
+  fi
+fi
+log "ready: $("$VENV/bin/python" -c 'import cfvs_maniskill.rendering.device as d; print(d.describe())')"

@@ -25,7 +25,7 @@ need_apt() {
 
 # 1. System libraries (only what is missing).
 missing=()
-ldconfig -p | grep -q 'libX11.so.6' || missing+=(libx11-6)
+ldconfig -p | grep 'libX11.so.6' >/dev/null || missing+=(libx11-6)
 python3.11 -m venv --help >/dev/null 2>&1 || missing+=(python3.11-venv)
 command -v python3.11 >/dev/null || missing+=(python3.11)
 if [ ${#missing[@]} -gt 0 ]; then

@@ -75,6 +75,20 @@ class HoleGeometry:
     def visual_trimesh(self) -> trimesh.Trimesh:
         return trimesh.Trimesh(self.visual_vertices, self.visual_faces, process=False)
 
+    def mesh_files(self) -> tuple[Path, list[Path]]:
+        """OBJ files (visual, convex parts) for SAPIEN's loaders, written once per cache key."""
+        d = cache_dir() / self.cache_key
+        visual = d / "visual.obj"
+        parts = [d / f"part{i:03d}.obj" for i in range(len(self.collision_parts))]
+        if not all(p.is_file() for p in [visual, *parts]):
+            tmp = Path(tempfile.mkdtemp(dir=cache_dir(), prefix=".tmp"))
+            self.visual_trimesh().export(tmp / visual.name)
+            for (v, f), p in zip(self.collision_parts, parts, strict=True):
+                trimesh.Trimesh(v, f, process=False).export(tmp / p.name)
+            shutil.rmtree(d, ignore_errors=True)
+            tmp.rename(d)
+        return visual, parts
+
 
 # --------------------------------------------------------------------------------------------
 # manifold helpers

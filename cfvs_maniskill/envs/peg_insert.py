@@ -1,0 +1,326 @@
+"""The peg-in-hole task, parameterised by a task file and registered once per file."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils import sapien_utils
+from mani_skill.utils.registration import register_env
+from mani_skill.utils.structs.pose import Pose
+from mani_skill.utils.structs.types import SimConfig
+
+from cfvs_maniskill import geometry as G
+from cfvs_maniskill.constants import PEG_LENGTH, hole_half_extent, peg_half_extent
+from cfvs_maniskill.envs.task_config import TaskConfig, load_tasks
+from cfvs_maniskill.objects.build import build_geometry
+from cfvs_maniskill.objects.library import load_library
+from cfvs_maniskill.rendering import device
+from cfvs_maniskill.robots.ur5 import TCP_LINK, robot_uid_for
+
+PRE_INSERT_HEIGHT = 0.03
+"""Pre-insertion pose: the peg tip this far above the hole's opening on its axis, metres."""
+SUCCESS_TIP_TOLERANCE = 0.005
+"""The tip must be within 5 mm of the hole's bottom."""
+SUCCESS_MAX_TILT_DEG = 10.0
+PARK = np.array([0.0, 5.0, -3.0])
+"""Unused hole objects wait here, out of every camera's view."""
+MAX_INIT_TRIES = 100
+
+
+def _quat_wxyz(T: np.ndarray) -> np.ndarray:
+    p = G.to_pose(T)
+    return np.concatenate([p.p, p.q])
+
+
+class PegInsertEnv(BaseEnv):
+    """
+    **Task Description:**
+    A UR5 carries a peg (round r 23 mm or square 46 mm, 100 mm long) rigidly on its flange
+    and must insert it into the hole of a hole object; an RGB-D camera on the wrist sees the
+    hole past the peg. Holes are the peg plus the task's clearance (4 mm) and 45 mm deep.
+
+    **Randomizations:**
+    - the hole object, among the task's objects (names or splits of `assets/holes/`);
+    - its position on the table (workspace_x / workspace_y), its yaw (yaw_deg) and the tilt
+      of the hole axis from vertical (tilt_deg, any azimuth);
+    - the peg's start: its tip `init_error` metres (15 cm small, 30 cm large) from the hole's
+      centre, within `init_cone_deg` of the hole axis, pointing at the hole +- init_aim_deg,
+      rolled +- init_roll_deg. A scene is resampled until inverse kinematics reaches the
+      start, the pre-insertion and the fully inserted pose, so every scene is solvable.
+    - point-cloud / depth noise N(0, depth_noise_std^2) per point (paper: 1 mm).
+
+    **Success Conditions:**
+    From true poses, in the hole's frame: the peg tip is within 5 mm of the hole's bottom,
+    inside the hole's cross-section, with the peg axis within 10 degrees of the hole axis.
+    A peg on the rim or beside the object is a failure.
+
+    Observations: `state` (robot qpos/qvel, tcp pose, true hole pose), `rgbd`, `pointcloud`.
+    The point cloud (`obs["pointcloud"]["xyzw"]`, shape (1, H*W, 4)) is the wrist camera's
+    depth back-projected into the **world frame**, metres, with w = 0 for pixels that saw
+    nothing (the far plane); noise is added to xyz.
+    """
+
+    task: TaskConfig  # set on each registered subclass
+    SUPPORTED_ROBOTS = ["ur5_peg_square", "ur5_peg_round"]
+
+    def __init__(
+        self,
+        *args,
+        objects: list[str] | tuple[str, ...] | None = None,
+        assets: list[str] | tuple[str, ...] = (),
+        init_error: str | float = "small",
+        robot_uids: str | None = None,
+        render_backend: str | None = None,
+        **kwargs,
+    ):
+        cfg = self.task
+        if isinstance(init_error, str):
+            if init_error not in cfg.init_error:
+                raise ValueError(
+                    f"unknown init_error '{init_error}'; valid: {', '.join(cfg.init_error)} "
+                    "or a distance in metres"
+                )
+            self.init_error_m = cfg.init_error[init_error]
+        else:
+            self.init_error_m = float(init_error)
+        library = load_library(assets)
+        self.object_specs = library.select(list(objects or cfg.objects), profile=cfg.peg)
+        self.object_names = [s.name for s in self.object_specs]
+        self.geometries = [
+            build_geometry(s, cfg.peg, cfg.clearance, cfg.hole_depth) for s in self.object_specs
+        ]
+        self.hole_pose = np.eye(4)
+        """World pose of the current hole frame (origin: centre of the opening, +z out)."""
+        self.object_index = 0
+        self.episode_info: dict[str, Any] = {}
+        self._noise_gen = torch.Generator().manual_seed(0)
+        super().__init__(
+            *args,
+            robot_uids=robot_uids or robot_uid_for(cfg.peg),
+            render_backend=render_backend or device.render_backend(),
+            **kwargs,
+        )
+
+    # ------------------------------------------------------------------ configuration
+    @property
+    def _default_sim_config(self):
+        # 500 Hz physics keeps a 4 mm-clearance peg from tunnelling; 20 Hz control.
+        return SimConfig(sim_freq=500, control_freq=20)
+
+    @property
+    def _default_sensor_configs(self):
+        return []  # the wrist camera belongs to the robot (robots/ur5.py)
+
+    @property
+    def _default_human_render_camera_configs(self):
+        pose = sapien_utils.look_at(eye=[1.05, 0.55, 0.55], target=[0.45, 0.0, 0.12])
+        return CameraConfig("render_camera", pose=pose, width=256, height=256, fov=0.9, near=0.01, far=10)
+
+    def _load_agent(self, options: dict):
+        super()._load_agent(options, sapien.Pose())
+        self.agent.camera_width = self.task.camera_width
+        self.agent.camera_height = self.task.camera_height
+
+    def _load_scene(self, options: dict):
+        b = self.scene.create_actor_builder()
+        b.add_box_collision(half_size=[1.0, 1.0, 0.025])
+        b.add_box_visual(
+            half_size=[1.0, 1.0, 0.025],
+            material=sapien.render.RenderMaterial(base_color=[0.82, 0.8, 0.76, 1.0]),
+        )
+        b.initial_pose = sapien.Pose(p=[0.3, 0, -0.025])
+        self.table = b.build_static(name="table")
+        self.hole_objects = []
+        for i, (spec, geom) in enumerate(zip(self.object_specs, self.geometries, strict=True)):
+            visual, parts = geom.mesh_files()
+            b = self.scene.create_actor_builder()
+            b.add_visual_from_file(
+                str(visual),
+                material=sapien.render.RenderMaterial(base_color=[*spec.color[:3], 1.0]),
+            )
+            for p in parts:
+                b.add_convex_collision_from_file(str(p))
+            b.initial_pose = sapien.Pose(p=PARK + [0, i, 0])
+            self.hole_objects.append(b.build_kinematic(name=f"hole_{spec.name}"))
+        robot = self.agent.robot._objs[0]
+        self._pin = robot.create_pinocchio_model()
+        # Pinocchio numbers links as the articulation does; ManiSkill prefixes their names.
+        names = [link.name for link in robot.get_links()]
+        self._tcp_index = next(i for i, n in enumerate(names) if n.endswith(TCP_LINK))
+
+    # ------------------------------------------------------------------ kinematics
+    def tcp_matrix(self) -> np.ndarray:
+        """True world pose of the peg tip frame (z along the peg, out of the flange)."""
+        return G.to_matrix(self.agent.tcp.pose.sp)
+
+    def ik(self, T: np.ndarray, seed: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+        """Joint positions putting the tcp at world pose T (the robot base is the world)."""
+        if seed is None:
+            seed = self.agent.robot.get_qpos()[0].cpu().numpy()
+        if not np.all(np.isfinite(T)):
+            return seed, False
+        q, ok, _ = self._pin.compute_inverse_kinematics(
+            self._tcp_index, G.to_pose(T), initial_qpos=np.asarray(seed, np.float64), max_iterations=300
+        )
+        if ok:
+            self._pin.compute_forward_kinematics(q)
+            got = G.to_matrix(self._pin.get_link_pose(self._tcp_index))
+            ok = np.linalg.norm(got[:3, 3] - T[:3, 3]) < 1e-3 and G.rot_angle(got[:3, :3].T @ T[:3, :3]) < 1e-2
+        return np.asarray(q), bool(ok)
+
+    def insertion_pose(self, depth: float, hole: np.ndarray | None = None, ref: np.ndarray | None = None):
+        """Tcp pose with the tip `depth` m below the hole's opening (negative: above it).
+
+        Tool z = -hole z. For a square hole the tool's x is the hole axis (x, y, -x, -y)
+        nearest to `ref`'s x (the current tool), so the wrist never turns more than 45 deg.
+        """
+        H = self.hole_pose if hole is None else hole
+        z = -H[:3, 2]
+        x_hint = (self.tcp_matrix() if ref is None else ref)[:3, 0]
+        if self.task.peg == "square":
+            cands = [H[:3, 0], H[:3, 1], -H[:3, 0], -H[:3, 1]]
+            x_hint = max(cands, key=lambda c: float(c @ x_hint))
+        R = G.frame_with_z(z, x_hint)
+        return G.make(R, H[:3, 3] + depth * z)
+
+    # ------------------------------------------------------------------ episodes
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        cfg = self.task
+        seed = int(self._batched_episode_rng[0].randint(0, 2**31 - 1))
+        rng = np.random.default_rng(seed)
+        self._noise_gen.manual_seed(seed)
+        name = options.get("object")
+        if name is not None:
+            if name not in self.object_names:
+                raise ValueError(f"unknown object '{name}'; this env has: {', '.join(self.object_names)}")
+            idx = self.object_names.index(name)
+        else:
+            idx = int(rng.integers(len(self.object_names)))
+        geom = self.geometries[idx]
+        home = np.asarray(self.agent.keyframes["home"].qpos)
+        for _ in range(MAX_INIT_TRIES):
+            T_obj, H = self._sample_object_pose(rng, geom)
+            T_start = self._sample_start(rng, H)
+            q0, ok0 = self.ik(T_start, home)
+            q1, ok1 = self.ik(self.insertion_pose(-PRE_INSERT_HEIGHT, H, T_start), q0)
+            _, ok2 = self.ik(self.insertion_pose(cfg.hole_depth - 0.002, H, T_start), q1)
+            if ok0 and ok1 and ok2:
+                break
+        else:
+            raise RuntimeError(f"no reachable scene in {MAX_INIT_TRIES} tries for {geom.name}")
+        for i, obj in enumerate(self.hole_objects):
+            obj.set_pose(G.to_pose(T_obj) if i == idx else sapien.Pose(p=PARK + [0, i, 0]))
+        self.object_index, self.hole_pose = idx, H
+        qt = torch.as_tensor(q0, dtype=torch.float32)[None]
+        self.agent.reset(qt)
+        tilt = np.degrees(np.arccos(np.clip(H[2, 2], -1, 1)))
+        self.episode_info = dict(
+            object=geom.name,
+            tilt_deg=float(tilt),
+            init_error_m=float(np.linalg.norm(T_start[:3, 3] - H[:3, 3])),
+            hole_pose=H.tolist(),
+        )
+
+    def _sample_object_pose(self, rng: np.random.Generator, geom) -> tuple[np.ndarray, np.ndarray]:
+        cfg = self.task
+        yaw = np.radians(rng.uniform(*cfg.yaw_deg))
+        tilt = np.radians(rng.uniform(*cfg.tilt_deg))
+        azimuth = rng.uniform(0, 2 * np.pi)
+        axis = np.array([np.cos(azimuth), np.sin(azimuth), 0.0])
+        from scipy.spatial.transform import Rotation
+
+        R = (Rotation.from_rotvec(axis * tilt) * Rotation.from_euler("z", yaw)).as_matrix()
+        v = geom.visual_vertices @ R.T
+        xy = [rng.uniform(*cfg.workspace_x), rng.uniform(*cfg.workspace_y)]
+        # Place the body so that its lowest point touches the table.
+        T_obj = G.make(R, np.array([*xy, -v[:, 2].min()]))
+        H = T_obj @ G.make(np.eye(3), geom.hole_frame)
+        return T_obj, H
+
+    def _sample_start(self, rng: np.random.Generator, H: np.ndarray) -> np.ndarray:
+        cfg = self.task
+        while True:
+            u = G.random_cone(rng, H[:3, 2], np.radians(cfg.init_cone_deg))
+            if u[2] > 0.5:  # start above the hole, never below the table's horizon
+                break
+        p = H[:3, 3] + self.init_error_m * u
+        look = G.random_cone(rng, -u, np.radians(cfg.init_aim_deg))
+        R = G.frame_with_z(look, np.array([1.0, 0.0, 0.0]))
+        roll = np.radians(rng.uniform(-cfg.init_roll_deg, cfg.init_roll_deg))
+        c, s = np.cos(roll), np.sin(roll)
+        R = R @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        return G.make(R, p)
+
+    # ------------------------------------------------------------------ evaluation
+    def evaluate(self) -> dict[str, torch.Tensor]:
+        cfg = self.task
+        T = G.inv(self.hole_pose) @ self.tcp_matrix()
+        tip = T[:3, 3]
+        lateral = float(np.hypot(tip[0], tip[1]))
+        tip_to_bottom = float(tip[2] + cfg.hole_depth)
+        tilt = float(np.degrees(np.arccos(np.clip(-T[2, 2], -1, 1))))
+        room = hole_half_extent(cfg.peg, cfg.clearance) - peg_half_extent(cfg.peg)
+        inside = lateral <= room * np.sqrt(2) + 0.001 and max(abs(tip[0]), abs(tip[1])) <= room + 0.001
+        success = abs(tip_to_bottom) <= SUCCESS_TIP_TOLERANCE and inside and tilt <= SUCCESS_MAX_TILT_DEG
+        finite = bool(np.all(np.isfinite(T)))
+
+        def t(x, dtype=torch.float32):
+            return torch.tensor([x], dtype=dtype, device=self.device)
+
+        return dict(
+            success=t(success and finite, torch.bool),
+            fail=t(not finite, torch.bool),
+            tip_to_bottom=t(tip_to_bottom),
+            lateral_offset=t(lateral),
+            tilt_error_deg=t(tilt),
+            tip_depth=t(-tip[2]),
+        )
+
+    def _get_obs_extra(self, info: dict):
+        extra = dict(tcp_pose=self.agent.tcp.pose.raw_pose)
+        if self.obs_mode in ("state", "state_dict"):
+            extra["hole_pose"] = torch.as_tensor(_quat_wxyz(self.hole_pose), dtype=torch.float32)[None]
+        return extra
+
+    def get_obs(self, info: dict | None = None, unflattened: bool = False):
+        obs = super().get_obs(info, unflattened)
+        std = self.task.depth_noise_std
+        if std > 0 and isinstance(obs, dict):
+            if "pointcloud" in obs:
+                xyzw = obs["pointcloud"]["xyzw"]
+                noise = torch.randn(xyzw[..., :3].shape, generator=self._noise_gen) * std
+                xyzw[..., :3] += noise.to(xyzw.device) * (xyzw[..., 3:] > 0)
+            for cam in obs.get("sensor_data", {}).values():
+                if "depth" in cam:  # int16 millimetres
+                    d = cam["depth"]
+                    noise = torch.randn(d.shape, generator=self._noise_gen) * std * 1000
+                    cam["depth"] = torch.where(d > 0, (d + noise.round().to(d.dtype)), d)
+        return obs
+
+    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        # Distance of the tip to the hole's bottom plus the lateral offset, in metres.
+        return -(info["tip_to_bottom"].abs() + info["lateral_offset"]) + 2.0 * info["success"]
+
+    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return self.compute_dense_reward(obs, action, info) / 2.0
+
+
+def register_tasks() -> dict[str, TaskConfig]:
+    """Register `<name>-v1` for every file in `tasks/` (idempotent)."""
+    from mani_skill.utils.registration import REGISTERED_ENVS
+
+    tasks = load_tasks()
+    for name, cfg in tasks.items():
+        if cfg.env_id in REGISTERED_ENVS:
+            continue
+        cls = type(name, (PegInsertEnv,), {"task": cfg, "__doc__": PegInsertEnv.__doc__})
+        register_env(cfg.env_id, max_episode_steps=cfg.max_episode_steps)(cls)
+    return tasks
+
+
+__all__ = ["PEG_LENGTH", "PegInsertEnv", "Pose", "register_tasks"]

@@ -1,0 +1,92 @@
+"""Declarative task files (`tasks/*.yaml`): one file per task, one registered env per file."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from cfvs_maniskill.constants import DEFAULT_CLEARANCE, DEFAULT_HOLE_DEPTH, PEG_PROFILES, TASKS_DIR
+
+
+class TaskConfigError(ValueError):
+    def __init__(self, file: Path | str, field_name: str, message: str):
+        super().__init__(f"{file}: field '{field_name}': {message}")
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """One peg-in-hole task. Lengths in metres, angles in degrees."""
+
+    name: str
+    """Task name; the env id is `<name>-v1`."""
+    peg: str = "square"
+    """Peg profile: round | square."""
+    clearance: float = DEFAULT_CLEARANCE
+    """Hole minus peg width (diametral), metres."""
+    hole_depth: float = DEFAULT_HOLE_DEPTH
+    """Depth of the hole, metres."""
+    objects: tuple[str, ...] = ("test",)
+    """Default hole objects: names or splits (train | test | all)."""
+    workspace_x: tuple[float, float] = (0.40, 0.60)
+    """Range of the hole object's x position on the table (world frame, metres)."""
+    workspace_y: tuple[float, float] = (-0.15, 0.15)
+    """Range of the hole object's y position on the table (world frame, metres)."""
+    yaw_deg: tuple[float, float] = (0.0, 0.0)
+    """Range of the object's rotation about the vertical, degrees."""
+    tilt_deg: tuple[float, float] = (0.0, 0.0)
+    """Range of the hole axis' angle from vertical, degrees (6-DoF: 0-50)."""
+    init_error: dict[str, float] = field(default_factory=lambda: {"small": 0.15, "large": 0.30})
+    """Named initial peg-tip-to-hole distances, metres (paper: 15 cm small, 30 cm large)."""
+    init_cone_deg: float = 25.0
+    """The peg starts within this angle of the hole's axis, looking at the hole +- init_aim_deg."""
+    init_aim_deg: float = 5.0
+    """Random tilt of the starting tool axis away from the line to the hole, degrees."""
+    init_roll_deg: float = 45.0
+    """Random rotation of the starting tool about its axis, +- degrees."""
+    depth_noise_std: float = 0.001
+    """Gaussian noise on the point cloud, metres (paper: N(0, 1 mm^2))."""
+    camera_width: int = 128
+    camera_height: int = 128
+    max_episode_steps: int = 1500
+    """Control steps (20 Hz) before the episode is truncated."""
+    source: str = ""
+
+    @property
+    def env_id(self) -> str:
+        return f"{self.name}-v1"
+
+
+def load_task(path: Path) -> TaskConfig:
+    data: Any = yaml.safe_load(Path(path).read_text())
+    if not isinstance(data, dict):
+        raise TaskConfigError(path, "<top>", "expected a mapping of task fields")
+    known = {f.name: f for f in fields(TaskConfig) if f.name != "source"}
+    kwargs: dict[str, Any] = {"name": Path(path).stem, "source": str(path)}
+    for k, v in data.items():
+        if k not in known:
+            raise TaskConfigError(path, k, f"unknown key; expected one of {', '.join(known)}")
+        if k in ("workspace_x", "workspace_y", "yaw_deg", "tilt_deg"):
+            if not (isinstance(v, list) and len(v) == 2 and all(isinstance(x, int | float) for x in v)):
+                raise TaskConfigError(path, k, f"expected [min, max], got {v!r}")
+            v = (float(v[0]), float(v[1]))
+        elif k == "objects":
+            v = tuple([v] if isinstance(v, str) else v)
+        elif k == "init_error":
+            if not isinstance(v, dict) or not all(isinstance(x, int | float) and x > 0 for x in v.values()):
+                raise TaskConfigError(path, k, f"expected a mapping name -> metres, got {v!r}")
+            v = {str(a): float(b) for a, b in v.items()}
+        kwargs[k] = v
+    cfg = TaskConfig(**kwargs)
+    if cfg.peg not in PEG_PROFILES:
+        raise TaskConfigError(path, "peg", f"expected one of {PEG_PROFILES}, got {cfg.peg!r}")
+    if not (0 < cfg.clearance < 0.02):
+        raise TaskConfigError(path, "clearance", f"expected 0 < clearance < 0.02 m, got {cfg.clearance}")
+    return cfg
+
+
+def load_tasks(directory: Path = TASKS_DIR) -> dict[str, TaskConfig]:
+    """All task files in `directory`, by task name."""
+    return {p.stem: load_task(p) for p in sorted(Path(directory).glob("*.yaml"))}

@@ -1,0 +1,60 @@
+"""Small SE(3) helpers on 4x4 numpy matrices (metres, radians)."""
+
+from __future__ import annotations
+
+import numpy as np
+import sapien
+from scipy.spatial.transform import Rotation
+
+
+def to_matrix(pose: sapien.Pose) -> np.ndarray:
+    return np.asarray(pose.to_transformation_matrix(), dtype=np.float64)
+
+
+def to_pose(T: np.ndarray) -> sapien.Pose:
+    q = Rotation.from_matrix(T[:3, :3]).as_quat()  # x y z w
+    return sapien.Pose(p=T[:3, 3].astype(np.float32), q=[q[3], q[0], q[1], q[2]])
+
+
+def make(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def inv(T: np.ndarray) -> np.ndarray:
+    R, p = T[:3, :3], T[:3, 3]
+    return make(R.T, -R.T @ p)
+
+
+def rot_angle(R: np.ndarray) -> float:
+    """Angle of a rotation matrix, radians."""
+    return float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
+
+
+def frame_with_z(z: np.ndarray, x_hint: np.ndarray) -> np.ndarray:
+    """Rotation whose z axis is `z` and whose x axis is as close as possible to `x_hint`."""
+    z = z / np.linalg.norm(z)
+    x = x_hint - (x_hint @ z) * z
+    if np.linalg.norm(x) < 1e-6:
+        x = np.cross(z, [0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.cross(z, [1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], axis=1)
+
+
+def random_cone(rng: np.random.Generator, axis: np.ndarray, half_angle: float) -> np.ndarray:
+    """A unit vector uniform on the spherical cap of `half_angle` radians around `axis`."""
+    cos_t = rng.uniform(np.cos(half_angle), 1.0)
+    phi = rng.uniform(0, 2 * np.pi)
+    sin_t = np.sqrt(1 - cos_t**2)
+    local = np.array([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t])
+    return frame_with_z(axis, np.array([1.0, 0, 0])) @ local
+
+
+def interpolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
+    """Straight line in position, slerp in rotation; s in [0, 1]."""
+    rots = Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]]))
+    from scipy.spatial.transform import Slerp
+
+    R = Slerp([0.0, 1.0], rots)([s]).as_matrix()[0]
+    return make(R, (1 - s) * T0[:3, 3] + s * T1[:3, 3])

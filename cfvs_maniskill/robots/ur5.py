@@ -1,0 +1,232 @@
+"""UR5 with a peg rigidly on its flange (no gripper) and an eye-in-hand RGB-D camera.
+
+The arm comes from the PyPI package `example-robot-data` (BSD); nothing is downloaded. At
+import we write a derived URDF into the cache folder:
+  * mesh paths made absolute; the low-poly collision STLs also serve as visual meshes,
+    because rendering cost is set by the triangles in view (the .dae visuals are ~50x more);
+  * the stock 1 cm `ee_link` collision box removed (it would touch the peg);
+  * `tool0` (already in the URDF): the flange frame, +z along the tool axis;
+  * `peg`: a 100 mm round or square peg along tool0's +z (sizes from `constants`);
+  * `tcp`: the peg's tip, same axes as tool0. Poses the executor commands are tcp poses.
+
+Self-collision: every link pair of the arm is filtered (ManiSkill's `disable_self_collisions`),
+so the peg never collides with the wrist it is bolted to; the arm and peg still collide with
+the world. The executor's moves stay in the open workspace above the table.
+
+Joint drives: stiffness 2000 N m/rad, damping 200 N m s/rad, torque limits from the UR5
+datasheet (150 N m shoulder/elbow, 28 N m wrist). Gravity is compensated by ManiSkill
+(`balance_passive_force`), so the stiffness only resists contact: a 5 mm lead at 0.5 m gives
+tens of newtons at the tip, never kilonewtons.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import xml.etree.ElementTree as ET
+from copy import deepcopy
+from pathlib import Path
+
+import numpy as np
+import sapien
+from mani_skill.agents.base_agent import BaseAgent, Keyframe
+from mani_skill.agents.controllers import PDJointPosControllerConfig, deepcopy_dict
+from mani_skill.agents.registration import register_agent
+from mani_skill.sensors.camera import CameraConfig
+from scipy.spatial.transform import Rotation
+
+from cfvs_maniskill.constants import PEG_LENGTH, ROUND_PEG_RADIUS, SQUARE_PEG_SIDE
+
+ARM_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+TORQUE_LIMITS = np.array([150.0, 150.0, 150.0, 28.0, 28.0, 28.0])
+"""N m, from the UR5 datasheet (the URDF's `effort` values)."""
+STIFFNESS = 2000.0
+DAMPING = 200.0
+
+HOME_QPOS = np.array([0.0, -1.9, 1.9, -1.571, -1.571, 0.0])
+"""Peg pointing straight down about 0.35 m above the table, 0.45 m in front of the base."""
+
+TCP_LINK = "tcp"
+TOOL_LINK = "tool0"
+CAMERA_UID = "wrist_camera"
+CAMERA_OFFSET = np.array([0.11, 0.0, 0.05])
+"""Camera position in tool0 (m): 11 cm off the tool axis, 5 cm forward of the flange on a
+bracket, so its view of the hole passes beside the peg even 5 cm above the hole."""
+CAMERA_AIM = np.array([0.0, 0.0, 0.30])
+"""Point on the tool axis (tool0 frame, m) the optical axis goes through: 20 cm past the tip."""
+CAMERA_FOV = np.deg2rad(70.0)
+"""Vertical field of view, radians."""
+
+
+def _ur5_dir() -> Path:
+    import site
+
+    for base in map(Path, site.getsitepackages()):
+        d = base / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "ur_description"
+        if d.is_dir():
+            return d
+    raise FileNotFoundError(
+        "example-robot-data's ur_description not found in site-packages; "
+        "run `pip install example-robot-data==6.0.0`"
+    )
+
+
+def camera_pose_in_tool() -> sapien.Pose:
+    """Mount pose of the wrist camera in tool0 (SAPIEN cameras look along their +x)."""
+    x = CAMERA_AIM - CAMERA_OFFSET
+    x /= np.linalg.norm(x)
+    y = np.array([0.0, 1.0, 0.0])
+    z = np.cross(x, y)
+    q = Rotation.from_matrix(np.stack([x, y, z], axis=1)).as_quat()  # x y z w
+    return sapien.Pose(p=CAMERA_OFFSET, q=[q[3], q[0], q[1], q[2]])
+
+
+def _link(name: str, geometry: ET.Element | None, z_center: float, mass: float) -> ET.Element:
+    link = ET.Element("link", name=name)
+    inertial = ET.SubElement(link, "inertial")
+    ET.SubElement(inertial, "mass", value=f"{mass}")
+    ET.SubElement(inertial, "origin", xyz=f"0 0 {z_center}", rpy="0 0 0")
+    ET.SubElement(inertial, "inertia", ixx="1e-4", iyy="1e-4", izz="1e-4", ixy="0", ixz="0", iyz="0")
+    if geometry is not None:
+        for tag in ("visual", "collision"):
+            el = ET.SubElement(link, tag)
+            ET.SubElement(el, "origin", xyz=f"0 0 {z_center}", rpy="0 0 0")
+            el.append(deepcopy(geometry))
+    return link
+
+
+def _fixed(name: str, parent: str, child: str, xyz: str, rpy: str) -> ET.Element:
+    j = ET.Element("joint", name=name, type="fixed")
+    ET.SubElement(j, "parent", link=parent)
+    ET.SubElement(j, "child", link=child)
+    ET.SubElement(j, "origin", xyz=xyz, rpy=rpy)
+    return j
+
+
+def build_urdf(profile: str) -> str:
+    """Text of the UR5 + peg URDF for a peg `profile` ("round" or "square")."""
+    src = _ur5_dir()
+    tree = ET.parse(src / "urdf" / "ur5_robot.urdf")
+    robot = tree.getroot()
+    for el in list(robot):
+        if el.tag in ("gazebo", "transmission"):
+            robot.remove(el)
+    for link in robot.findall("link"):
+        if link.get("name") == "ee_link":
+            for c in link.findall("collision"):
+                link.remove(c)
+        for vis in link.findall("visual"):
+            mesh = vis.find("geometry/mesh")
+            if mesh is not None:
+                mesh.set("filename", mesh.get("filename").replace("/visual/", "/collision/").replace(".dae", ".stl"))
+    for mesh in robot.iter("mesh"):
+        fn = mesh.get("filename")
+        mesh.set("filename", str(src / fn.split("ur_description/", 1)[1]))
+
+    geom = ET.Element("geometry")
+    if profile == "round":
+        ET.SubElement(geom, "cylinder", radius=f"{ROUND_PEG_RADIUS}", length=f"{PEG_LENGTH}")
+    else:
+        s = SQUARE_PEG_SIDE
+        ET.SubElement(geom, "box", size=f"{s} {s} {PEG_LENGTH}")
+    # The URDF's own tool0 is the flange frame with +z out of the flange (ROS-I convention).
+    robot.append(_fixed("peg_joint", TOOL_LINK, "peg", "0 0 0", "0 0 0"))
+    robot.append(_link("peg", geom, PEG_LENGTH / 2, 0.3))
+    robot.append(_fixed("tcp_joint", TOOL_LINK, TCP_LINK, f"0 0 {PEG_LENGTH}", "0 0 0"))
+    robot.append(_link(TCP_LINK, None, 0.0, 0.01))
+    robot.set("name", f"ur5_peg_{profile}")
+    return ET.tostring(robot, encoding="unicode")
+
+
+def urdf_path(profile: str) -> str:
+    """Write (once) and return the derived URDF for `profile` in the cache folder."""
+    text = build_urdf(profile)
+    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
+    root = Path(os.environ.get("CFVS_CACHE", Path.home() / ".cache" / "cfvs_maniskill"))
+    path = root / "robots" / f"ur5_peg_{profile}_{digest}.urdf"
+    if not path.is_file():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(text)
+        tmp.replace(path)
+    return str(path)
+
+
+class _UR5Peg(BaseAgent):
+    peg_profile = "square"
+    disable_self_collisions = True
+    keyframes = dict(home=Keyframe(qpos=HOME_QPOS, pose=sapien.Pose()))
+    camera_width = 128
+    camera_height = 128
+    """Wrist-camera resolution; tasks set it from their file before the scene is built."""
+
+    @property
+    def _sensor_configs(self):
+        return [
+            CameraConfig(
+                uid=CAMERA_UID,
+                pose=camera_pose_in_tool(),
+                width=self.camera_width,
+                height=self.camera_height,
+                fov=CAMERA_FOV,
+                near=0.01,
+                far=2.0,
+                mount=self.robot.links_map[TOOL_LINK],
+            )
+        ]
+
+    @property
+    def _controller_configs(self):
+        # Absolute joint targets: the shared executor does IK itself (Pinocchio) and checks
+        # that every target was reached, instead of a controller that silently holds.
+        arm = PDJointPosControllerConfig(
+            list(ARM_JOINTS),
+            lower=None,
+            upper=None,
+            stiffness=STIFFNESS,
+            damping=DAMPING,
+            force_limit=TORQUE_LIMITS.tolist(),
+            normalize_action=False,
+        )
+        delta = PDJointPosControllerConfig(
+            list(ARM_JOINTS),
+            lower=-0.1,
+            upper=0.1,
+            stiffness=STIFFNESS,
+            damping=DAMPING,
+            force_limit=TORQUE_LIMITS.tolist(),
+            use_delta=True,
+        )
+        return deepcopy_dict(dict(pd_joint_pos=dict(arm=arm), pd_joint_delta_pos=dict(arm=delta)))
+
+    def _after_init(self):
+        self.tcp = self.robot.links_map[TCP_LINK]
+
+
+@register_agent()
+class UR5SquarePeg(_UR5Peg):
+    """UR5 carrying the paper's 46 x 46 x 100 mm square peg."""
+
+    uid = "ur5_peg_square"
+    peg_profile = "square"
+    urdf_path = urdf_path("square")
+
+
+@register_agent()
+class UR5RoundPeg(_UR5Peg):
+    """UR5 carrying the paper's r 23 mm x 100 mm round peg."""
+
+    uid = "ur5_peg_round"
+    peg_profile = "round"
+    urdf_path = urdf_path("round")
+
+
+def robot_uid_for(profile: str) -> str:
+    return {"square": UR5SquarePeg.uid, "round": UR5RoundPeg.uid}[profile]

@@ -1,0 +1,1 @@
+"""Policies ("agents" in this project; the robot is in `robots/`) and the shared executor."""

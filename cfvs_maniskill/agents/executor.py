@@ -1,0 +1,123 @@
+"""The executor every agent shares: target tcp poses -> IK -> joint-position control steps.
+
+Agents only decide *where* the peg should go; this module moves it there the same way for
+all of them, so their success rates and servo times compare fairly.
+
+* Moves are straight lines in Cartesian space (slerp in rotation) at most `max_speed`
+  (0.25 m/s) and `max_turn` (90 deg/s): a cautious UR5 tool speed near parts. Every
+  waypoint is solved by IK (Pinocchio, seeded by the previous one); an unreachable target is
+  reported, never silently held.
+* Servo time is simulated time: control steps x 0.05 s.
+* `insert` moves the peg down its own axis with limited force: the commanded pose may lead
+  the real tip by at most `max_lead` (4 mm), which with the arm's joint stiffness bounds the
+  contact force to a few tens of newtons; a peg that stops advancing (on a rim) ends the
+  insertion instead of being pushed through.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from cfvs_maniskill import geometry as G
+
+
+@dataclass
+class MoveResult:
+    ok: bool
+    reason: str = ""
+    steps: int = 0
+
+
+@dataclass
+class ExecutorConfig:
+    max_speed: float = 0.25
+    """Tool speed limit, m/s."""
+    max_turn: float = np.radians(90.0)
+    """Tool rotation speed limit, rad/s."""
+    settle_steps: int = 6
+    """Extra control steps at the goal so the arm comes to rest."""
+    insert_speed: float = 0.05
+    """Insertion speed along the tool axis, m/s."""
+    max_lead: float = 0.004
+    """How far the commanded tip may run ahead of the real one during insertion, m."""
+    stall_steps: int = 6
+    """Insertion ends when the tip advanced < 0.5 mm over this many steps."""
+
+
+class Executor:
+    def __init__(self, env, cfg: ExecutorConfig | None = None):
+        self.env = env.unwrapped
+        self.gym_env = env
+        self.cfg = cfg or ExecutorConfig()
+        self.dt = 1.0 / self.env.control_freq
+        self.steps = 0
+        self.last_info: dict = {}
+        self.last_obs = None
+
+    @property
+    def servo_time(self) -> float:
+        """Simulated seconds spent moving since the last `reset`."""
+        return self.steps * self.dt
+
+    def reset(self) -> None:
+        self.steps = 0
+
+    def _step(self, q: np.ndarray):
+        action = torch.as_tensor(q, dtype=torch.float32)[None]
+        self.last_obs, _, _, _, self.last_info = self.gym_env.step(action)
+        self.steps += 1
+        if not np.all(np.isfinite(self.env.agent.robot.get_qpos().cpu().numpy())):
+            raise FloatingPointError("simulation state became NaN")
+
+    def move_to(self, target: np.ndarray) -> MoveResult:
+        """Move the tcp to world pose `target` (4x4) along a straight line."""
+        if target.shape != (4, 4) or not np.all(np.isfinite(target)):
+            return MoveResult(False, "target pose is not a finite 4x4 matrix")
+        start = self.env.tcp_matrix()
+        dist = np.linalg.norm(target[:3, 3] - start[:3, 3])
+        turn = G.rot_angle(start[:3, :3].T @ target[:3, :3])
+        n = max(1, int(np.ceil(max(dist / self.cfg.max_speed, turn / self.cfg.max_turn) / self.dt)))
+        q = self.env.agent.robot.get_qpos()[0].cpu().numpy()
+        q_goal, ok = self.env.ik(target, q)
+        if not ok:
+            return MoveResult(False, "target pose unreachable (no IK solution)")
+        path = []
+        for i in range(1, n + 1):
+            q, ok = self.env.ik(G.interpolate(start, target, i / n), q)
+            if not ok:
+                return MoveResult(False, f"path unreachable at {i}/{n} of the way (no IK solution)")
+            path.append(q)
+        steps0 = self.steps
+        for q in path:
+            self._step(q)
+        for _ in range(self.cfg.settle_steps):
+            self._step(path[-1])
+        return MoveResult(True, "", self.steps - steps0)
+
+    def insert(self, depth: float) -> MoveResult:
+        """Push the peg `depth` metres along its own axis (its +z), with bounded force."""
+        T0 = self.env.tcp_matrix()
+        axis = T0[:3, 2]
+        q = self.env.agent.robot.get_qpos()[0].cpu().numpy()
+        cmd = 0.0
+        history = [0.0]
+        steps0 = self.steps
+        while cmd < depth:
+            done = float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis)
+            cmd = min(depth, cmd + self.cfg.insert_speed * self.dt, done + self.cfg.max_lead)
+            T = T0.copy()
+            T[:3, 3] = T0[:3, 3] + cmd * axis
+            q, ok = self.env.ik(T, q)
+            if not ok:
+                return MoveResult(False, "insertion path unreachable", self.steps - steps0)
+            self._step(q)
+            history.append(float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis))
+            k = self.cfg.stall_steps
+            if len(history) > k and history[-1] - history[-1 - k] < 0.0005:
+                break  # blocked: on the rim or at the bottom
+        for _ in range(self.cfg.settle_steps):
+            self._step(q)
+        return MoveResult(True, "", self.steps - steps0)

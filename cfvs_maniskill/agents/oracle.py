@@ -1,0 +1,26 @@
+"""The oracle: reads the true hole pose. The ceiling of every agent and proof of solvability."""
+
+from __future__ import annotations
+
+from cfvs_maniskill.agents.base import Action, Agent, Observation
+from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+
+
+class OracleAgent(Agent):
+    """Move to the true pre-insertion pose, then insert."""
+
+    name = "oracle"
+    obs_mode = "state"
+
+    def __init__(self, env):
+        self.env = env.unwrapped
+        self._moved = False
+
+    def reset(self, info: dict) -> None:
+        self._moved = False
+
+    def act(self, observation: Observation) -> Action:
+        if not self._moved:
+            self._moved = True
+            return Action.move(self.env.insertion_pose(-PRE_INSERT_HEIGHT))
+        return Action.insert()

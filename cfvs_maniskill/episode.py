@@ -1,0 +1,102 @@
+"""One episode of any agent through the shared executor, as one result record."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from cfvs_maniskill.agents.base import Agent, Observation
+from cfvs_maniskill.agents.executor import Executor
+from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+
+INSERT_OVERSHOOT = 0.01
+"""The insertion is commanded 1 cm past the hole's bottom; the bottom stops it."""
+
+
+@dataclass
+class EpisodeResult:
+    task: str
+    agent: str
+    object: str
+    seed: int
+    init_error_m: float
+    success: bool
+    servo_time_s: float
+    steps: int
+    reason: str
+    tilt_deg: float
+    tip_to_bottom_m: float
+    lateral_offset_m: float
+    wall_time_s: float
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def failure_reason(m: dict, depth: float) -> str:
+    """Why a finished insertion is not a success, from the env's evaluate() metrics."""
+    if m["tilt_error_deg"] > 10:
+        return f"peg tilted {m['tilt_error_deg']:.1f} deg from the hole axis"
+    if m["tip_depth"] < 0.005:
+        if m["lateral_offset"] < 0.06:
+            return f"peg stopped on the rim ({1000 * m['lateral_offset']:.1f} mm off the axis)"
+        return f"peg missed the hole ({1000 * m['lateral_offset']:.0f} mm off the axis)"
+    return f"peg stuck {1000 * m['tip_to_bottom']:.1f} mm above the hole's bottom"
+
+
+def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict | None = None):
+    """Reset with `seed`, let the agent decide until it inserts or gives up, and score it."""
+    t0 = time.perf_counter()
+    u = env.unwrapped
+    obs, info = env.reset(seed=seed, options=options or {})
+    agent.reset(dict(u.episode_info))
+    executor.reset()
+    reason = ""
+    inserted = False
+    try:
+        for _ in range(agent.max_decisions):
+            action = agent.act(Observation(obs, u.tcp_matrix(), info))
+            if action.kind == "give_up":
+                reason = f"agent gave up: {action.reason}"
+                break
+            if action.kind == "insert":
+                depth = u.task.hole_depth + PRE_INSERT_HEIGHT + INSERT_OVERSHOOT
+                res = executor.insert(depth)
+                inserted = res.ok
+                reason = res.reason
+                break
+            if action.pose is None or not np.all(np.isfinite(action.pose)):
+                reason = "agent returned a non-finite pose"
+                break
+            res = executor.move_to(action.pose)
+            if not res.ok:
+                reason = res.reason
+                break
+            obs, info = executor.last_obs, executor.last_info
+        else:
+            reason = f"no insertion after {agent.max_decisions} decisions"
+    except FloatingPointError as e:
+        reason = f"simulation blew up: {e}"
+    m = {k: float(v[0]) for k, v in u.evaluate().items()}
+    success = bool(m["success"]) and inserted
+    if not success and not reason:
+        reason = failure_reason(m, u.task.hole_depth)
+    clean = {k: (v if math.isfinite(v) else float("nan")) for k, v in m.items()}
+    return EpisodeResult(
+        task=u.task.name,
+        agent=getattr(agent, "name", type(agent).__name__),
+        object=u.episode_info["object"],
+        seed=seed,
+        init_error_m=round(u.episode_info["init_error_m"], 4),
+        success=success,
+        servo_time_s=round(executor.servo_time, 3),
+        steps=executor.steps,
+        reason="" if success else reason,
+        tilt_deg=round(u.episode_info["tilt_deg"], 2),
+        tip_to_bottom_m=round(clean["tip_to_bottom"], 5),
+        lateral_offset_m=round(clean["lateral_offset"], 5),
+        wall_time_s=round(time.perf_counter() - t0, 3),
+    )

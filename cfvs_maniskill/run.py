@@ -1,0 +1,130 @@
+"""Run an agent on a peg-in-hole task: `python -m cfvs_maniskill.run --task PegInsert6DoF`.
+
+Prints one line per episode and a summary (success rate with its 95% Wilson interval, mean
+simulated servo time); `--out` appends one JSON object per episode; `--video` writes an mp4
+per episode, rendered off-screen (no display, no GPU needed).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import tyro
+
+
+@dataclass
+class RunArgs:
+    """Run an agent on a peg-in-hole task and report its success rate."""
+
+    task: str = "PegInsert6DoF"
+    """Task name or env id (a file in tasks/), e.g. PegInsert3DoF or PegInsert6DoF-v1."""
+    agent: str = "oracle"
+    """Policy to run: oracle (true hole pose; the default until CFVS weights ship)."""
+    episodes: int = 10
+    """Number of episodes."""
+    seed: int = 0
+    """Seed of the first episode; episode i uses seed + i."""
+    objects: tuple[str, ...] = ()
+    """Hole objects by name or split (train, test, all). Default: the task file's list."""
+    assets: tuple[Path, ...] = ()
+    """Extra directories (or files) of hole-object YAML specs, beside assets/holes/."""
+    init_error: Literal["small", "large"] = "small"
+    """Initial peg-to-hole distance: small (15 cm) or large (30 cm)."""
+    out: Path | None = None
+    """Append one JSON line per episode to this file."""
+    video: Path | None = None
+    """Write one mp4 per episode into this directory."""
+
+
+def _fail(message: str) -> None:
+    print(f"error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def resolve_task(name: str) -> str:
+    """Task name or env id -> env id, or exit 2 listing the valid names."""
+    from cfvs_maniskill import TASKS
+
+    base = name.removesuffix("-v1")
+    if base not in TASKS:
+        _fail(f"unknown task '{name}'; valid: {', '.join(sorted(TASKS))}")
+    return TASKS[base].env_id
+
+
+def main(args: RunArgs) -> list:
+    import gymnasium as gym
+    from tqdm import tqdm
+
+    from cfvs_maniskill.agents.executor import Executor
+    from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, AGENTS, make_agent
+    from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.objects.library import SelectionError
+    from cfvs_maniskill.stats import wilson_interval
+
+    env_id = resolve_task(args.task)
+    if args.agent not in AGENTS:
+        _fail(f"unknown agent '{args.agent}'; valid: {', '.join(AGENTS)}")
+    if args.episodes < 1:
+        _fail(f"--episodes must be >= 1, got {args.episodes}")
+    kwargs = dict(
+        obs_mode=AGENT_OBS_MODES.get(args.agent, "pointcloud"),
+        objects=list(args.objects) or None,
+        assets=[str(a) for a in args.assets],
+        init_error=args.init_error,
+    )
+    if args.video:
+        kwargs["render_mode"] = "rgb_array"
+    try:
+        env = gym.make(env_id, **kwargs)
+    except SelectionError as e:
+        _fail(str(e))
+    except FileNotFoundError as e:
+        _fail(str(e))
+    if args.video:
+        from mani_skill.utils.wrappers.record import RecordEpisode
+
+        env = RecordEpisode(
+            env, output_dir=str(args.video), save_trajectory=False, save_video=True,
+            video_fps=20, max_steps_per_video=None,
+        )
+    executor = Executor(env)
+    agent = make_agent(args.agent, env)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+    results = []
+    bar = tqdm(range(args.episodes), desc=f"{args.agent} on {env_id}", unit="ep", file=sys.stderr)
+    for i in bar:
+        r = run_episode(env, agent, executor, seed=args.seed + i)
+        results.append(r)
+        line = (
+            f"episode {i:4d} seed {r.seed:6d} {r.object:20s} "
+            f"{'success' if r.success else 'FAIL   '} servo {r.servo_time_s:5.2f} s"
+            + (f"  ({r.reason})" if r.reason else "")
+        )
+        tqdm.write(line)
+        if args.out:
+            with open(args.out, "a") as f:
+                f.write(json.dumps(r.to_json()) + "\n")
+                f.flush()
+                os.fsync(f.fileno())
+        bar.set_postfix(success=f"{sum(x.success for x in results)}/{len(results)}")
+    env.close()
+    k, n = sum(r.success for r in results), len(results)
+    lo, hi = wilson_interval(k, n)
+    servo = sum(r.servo_time_s for r in results) / n
+    print(
+        f"{args.agent} on {env_id} ({args.init_error} initial error): success {k}/{n} = "
+        f"{k / n:.2f} (95% CI {lo:.2f}-{hi:.2f}), mean servo time {servo:.2f} s"
+    )
+    if args.video:
+        print(f"videos in {args.video}")
+    return results
+
+
+if __name__ == "__main__":
+    main(tyro.cli(RunArgs))

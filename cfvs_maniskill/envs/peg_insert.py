@@ -74,6 +74,7 @@ class PegInsertEnv(BaseEnv):
         objects: list[str] | tuple[str, ...] | None = None,
         assets: list[str] | tuple[str, ...] = (),
         init_error: str | float = "small",
+        depth_noise_std: float | None = None,
         robot_uids: str | None = None,
         render_backend: str | None = None,
         **kwargs,
@@ -88,6 +89,7 @@ class PegInsertEnv(BaseEnv):
             self.init_error_m = cfg.init_error[init_error]
         else:
             self.init_error_m = float(init_error)
+        self.depth_noise_std = cfg.depth_noise_std if depth_noise_std is None else depth_noise_std
         library = load_library(assets)
         self.object_specs = library.select(list(objects or cfg.objects), profile=cfg.peg)
         self.object_names = [s.name for s in self.object_specs]
@@ -289,7 +291,7 @@ class PegInsertEnv(BaseEnv):
 
     def get_obs(self, info: dict | None = None, unflattened: bool = False):
         obs = super().get_obs(info, unflattened)
-        std = self.task.depth_noise_std
+        std = self.depth_noise_std
         if std > 0 and isinstance(obs, dict):
             if "pointcloud" in obs:
                 xyzw = obs["pointcloud"]["xyzw"]

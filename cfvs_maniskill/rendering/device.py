@@ -15,6 +15,7 @@ from __future__ import annotations
 import glob
 import os
 import sys
+import warnings
 from pathlib import Path
 
 SWIFTSHADER_BACKEND = "swiftshader"
@@ -53,6 +54,8 @@ def configure() -> str:
     """
     if "kind" in _state:
         return _state["kind"]
+    # SAPIEN falls back to its bundled Vulkan loader, which works; its warning only confuses.
+    warnings.filterwarnings("ignore", message="Failed to find system libvulkan")
     forced = os.environ.get("CFVS_RENDER_DEVICE", "").lower()
     if os.environ.get("VK_ICD_FILENAMES") and forced != "gpu":
         icd = os.environ["VK_ICD_FILENAMES"]

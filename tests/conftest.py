@@ -1,0 +1,39 @@
+"""Shared fixtures. All env tests run in this one pytest process, so the renderer's shader
+compile (first frame) happens once for the whole suite."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import cfvs_maniskill  # noqa: F401  (picks the render device, registers envs)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="session")
+def make_env():
+    """Cached gym.make: one env per distinct argument set for the whole session."""
+    import gymnasium as gym
+
+    cache: dict = {}
+
+    def make(env_id: str, **kwargs):
+        key = (env_id, tuple(sorted((k, str(v)) for k, v in kwargs.items())))
+        if key not in cache:
+            cache[key] = gym.make(env_id, **kwargs)
+        return cache[key]
+
+    yield make
+    for env in cache.values():
+        env.close()
+
+
+def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    """Run `python -m <args>` as a user would, from the repository root."""
+    return subprocess.run(
+        [sys.executable, "-m", *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout
+    )

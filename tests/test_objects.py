@@ -1,0 +1,97 @@
+"""Default hole objects: geometry, the open hole, the peg fit and the disk cache."""
+
+from __future__ import annotations
+
+import manifold3d as mf
+import numpy as np
+import pytest
+
+from cfvs_maniskill.constants import (
+    DEFAULT_CLEARANCE,
+    DEFAULT_HOLE_DEPTH,
+    PEG_LENGTH,
+    hole_half_extent,
+    peg_half_extent,
+)
+from cfvs_maniskill.objects.build import build_geometry, cache_dir, hole_solid
+from cfvs_maniskill.objects.library import load_library
+
+LIB = load_library()
+CASES = [(n, p) for n, s in sorted(LIB.specs.items()) for p in s.hole]
+
+
+def _solid(v, f) -> mf.Manifold:
+    return mf.Manifold(mf.Mesh(vert_properties=np.asarray(v, np.float32), tri_verts=np.asarray(f, np.uint32)))
+
+
+def test_default_library_mirrors_the_paper():
+    assert not LIB.errors
+    train = [s for s in LIB.specs.values() if s.split == "train"]
+    test = [s for s in LIB.specs.values() if s.split == "test"]
+    assert len(train) == 4 and all(s.body_kind == "box" for s in train)
+    kinds = sorted(s.body_kind for s in test)
+    assert kinds == ["box", "box", "cylinder", "prism"]
+    assert next(s for s in test if s.body_kind == "prism").body["sides"] == 5
+
+
+@pytest.mark.parametrize(("name", "profile"), CASES)
+def test_hole_is_cut_open_and_fits_the_peg(name, profile):
+    g = build_geometry(LIB.specs[name], profile)
+    mesh = g.visual_trimesh()
+    assert mesh.is_watertight and mesh.volume > 0
+    x, y, z_top = g.hole_frame
+    half = hole_half_extent(profile, DEFAULT_CLEARANCE)
+    depth = DEFAULT_HOLE_DEPTH
+
+    # The hole is open: its volume shrunk by 1 mm (and the space above it) touches no
+    # collision part.
+    probe = hole_solid(profile, half - 0.001, z_top - depth + 0.001, z_top + 0.1, (x, y))
+    for v, _ in g.collision_parts:
+        hull = mf.Manifold.hull_points(np.asarray(v, np.float32))
+        assert (hull ^ probe).volume() < 1e-9, f"{name}/{profile}: a collision part fills the hole"
+
+    body = _solid(g.visual_vertices, g.visual_faces)
+    peg = peg_half_extent(profile)
+    # The peg fits down to (almost) the bottom...
+    assert (body ^ hole_solid(profile, peg, z_top - depth + 0.0005, z_top + PEG_LENGTH, (x, y))).volume() < 1e-9
+    # ...but the floor stops it, and the walls stop a peg off the axis by more than the play.
+    assert (body ^ hole_solid(profile, peg, z_top - depth - 0.002, z_top, (x, y))).volume() > 1e-7
+    off = (x + DEFAULT_CLEARANCE / 2 + 0.001, y)
+    assert (body ^ hole_solid(profile, peg, z_top - depth / 2, z_top, off)).volume() > 1e-7
+    # Collision parts cover the body (no missing walls): their hulls hold its volume.
+    hull_vol = sum(mf.Manifold.hull_points(np.asarray(v, np.float32)).volume() for v, _ in g.collision_parts)
+    assert hull_vol == pytest.approx(mesh.volume, rel=0.02)
+
+
+def test_cached_build_is_reused_and_identical():
+    spec = LIB.specs["cylinder"]
+    a = build_geometry(spec, "round")
+    assert (cache_dir() / f"{a.cache_key}.npz").is_file()
+    b = build_geometry(spec, "round")
+    assert a.cache_key == b.cache_key
+    assert np.array_equal(a.visual_vertices, b.visual_vertices)
+    assert len(a.collision_parts) == len(b.collision_parts)
+    c = build_geometry(spec, "round", clearance=0.001)  # another clearance, another entry
+    assert c.cache_key != a.cache_key
+    assert c.hole_half_extent == pytest.approx(0.0235)
+
+
+def test_mesh_body_goes_through_coacd(tmp_path):
+    import trimesh
+
+    # An L-shaped bracket in millimetres: concave, so it needs a real decomposition.
+    a = trimesh.creation.box([150, 120, 70])
+    a.apply_translation([0, 0, 35])
+    b = trimesh.creation.box([40, 120, 60])
+    b.apply_translation([95, 0, 30])
+    bracket = trimesh.boolean.union([a, b], engine="manifold")
+    bracket.export(tmp_path / "bracket.stl")
+    (tmp_path / "bracket.yaml").write_text(
+        "split: test\nbody:\n  mesh: {file: bracket.stl, scale: 0.001}\nhole_at: [-0.02, 0.0]\n"
+    )
+    lib = load_library([tmp_path], include_default=False)
+    assert not lib.errors
+    g = build_geometry(lib.specs["bracket"], "square")
+    assert g.visual_trimesh().is_watertight
+    assert g.hole_frame[2] == pytest.approx(0.07, abs=1e-4)
+    assert len(g.collision_parts) >= 5

@@ -65,8 +65,13 @@ class Executor:
     def reset(self) -> None:
         self.steps = 0
 
-    def _step(self, q: np.ndarray):
-        action = torch.as_tensor(q, dtype=torch.float32)[None]
+    def _step(self, q: np.ndarray, qd: np.ndarray | None = None):
+        """One control step towards joint positions q with joint velocities qd (rad/s)."""
+        if self.env.control_mode == "pd_joint_pos_vel":
+            qd = np.zeros_like(q) if qd is None else qd
+            action = torch.as_tensor(np.concatenate([q, qd]), dtype=torch.float32)[None]
+        else:
+            action = torch.as_tensor(q, dtype=torch.float32)[None]
         self.last_obs, _, _, _, self.last_info = self.gym_env.step(action)
         self.steps += 1
         if not np.all(np.isfinite(self.env.agent.robot.get_qpos().cpu().numpy())):
@@ -91,8 +96,10 @@ class Executor:
                 return MoveResult(False, f"path unreachable at {i}/{n} of the way (no IK solution)")
             path.append(q)
         steps0 = self.steps
+        prev = self.env.agent.robot.get_qpos()[0].cpu().numpy()
         for q in path:
-            self._step(q)
+            self._step(q, (q - prev) / self.dt)
+            prev = q
         for _ in range(self.cfg.settle_steps):
             self._step(path[-1])
         return MoveResult(True, "", self.steps - steps0)
@@ -110,10 +117,11 @@ class Executor:
             cmd = min(depth, cmd + self.cfg.insert_speed * self.dt, done + self.cfg.max_lead)
             T = T0.copy()
             T[:3, 3] = T0[:3, 3] + cmd * axis
+            q_prev = q
             q, ok = self.env.ik(T, q)
             if not ok:
                 return MoveResult(False, "insertion path unreachable", self.steps - steps0)
-            self._step(q)
+            self._step(q, (q - q_prev) / self.dt)
             history.append(float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis))
             k = self.cfg.stall_steps
             if len(history) > k and history[-1] - history[-1 - k] < 0.0005:

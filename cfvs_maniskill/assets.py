@@ -56,7 +56,12 @@ def check(args: Annotated[Check, tyro.conf.OmitArgPrefixes]) -> int:
         except HoleSpecError as e:
             status, bad = f"[red]error[/red] {e}", bad + 1
         table.add_row(
-            spec.name, spec.split, spec.describe_body(), ", ".join(spec.hole), ", ".join(parts), status
+            spec.name,
+            spec.split,
+            spec.describe_body(),
+            ", ".join(spec.hole),
+            ", ".join(parts),
+            status,
         )
     for e in lib.errors:
         bad += 1

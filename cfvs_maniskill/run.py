@@ -89,8 +89,12 @@ def main(args: RunArgs) -> list:
         from mani_skill.utils.wrappers.record import RecordEpisode
 
         env = RecordEpisode(
-            env, output_dir=str(args.video), save_trajectory=False, save_video=True,
-            video_fps=20, max_steps_per_video=None,
+            env,
+            output_dir=str(args.video),
+            save_trajectory=False,
+            save_video=True,
+            video_fps=20,
+            max_steps_per_video=None,
         )
     executor = Executor(env)
     agent = make_agent(args.agent, env)

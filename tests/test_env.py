@@ -38,7 +38,12 @@ def test_obs_modes(make_env, env_id, obs_mode):
         assert xyzw.shape == (1, 128 * 128, 4)
     q = env.unwrapped.agent.robot.get_qpos()
     obs, *_ = env.step(q)  # holding still is a valid action
-    assert env.unwrapped.episode_info["object"] in ("cuboid_test_1", "cuboid_test_2", "cylinder", "pentagonal_prism")
+    assert env.unwrapped.episode_info["object"] in (
+        "cuboid_test_1",
+        "cuboid_test_2",
+        "cylinder",
+        "pentagonal_prism",
+    )
 
 
 @pytest.mark.parametrize("height", [0.05, 0.15, 0.30])

@@ -21,7 +21,9 @@ CASES = [(n, p) for n, s in sorted(LIB.specs.items()) for p in s.hole]
 
 
 def _solid(v, f) -> mf.Manifold:
-    return mf.Manifold(mf.Mesh(vert_properties=np.asarray(v, np.float32), tri_verts=np.asarray(f, np.uint32)))
+    return mf.Manifold(
+        mf.Mesh(vert_properties=np.asarray(v, np.float32), tri_verts=np.asarray(f, np.uint32))
+    )
 
 
 def test_default_library_mirrors_the_paper():
@@ -53,13 +55,17 @@ def test_hole_is_cut_open_and_fits_the_peg(name, profile):
     body = _solid(g.visual_vertices, g.visual_faces)
     peg = peg_half_extent(profile)
     # The peg fits down to (almost) the bottom...
-    assert (body ^ hole_solid(profile, peg, z_top - depth + 0.0005, z_top + PEG_LENGTH, (x, y))).volume() < 1e-9
+    assert (
+        body ^ hole_solid(profile, peg, z_top - depth + 0.0005, z_top + PEG_LENGTH, (x, y))
+    ).volume() < 1e-9
     # ...but the floor stops it, and the walls stop a peg off the axis by more than the play.
     assert (body ^ hole_solid(profile, peg, z_top - depth - 0.002, z_top, (x, y))).volume() > 1e-7
     off = (x + DEFAULT_CLEARANCE / 2 + 0.001, y)
     assert (body ^ hole_solid(profile, peg, z_top - depth / 2, z_top, off)).volume() > 1e-7
     # Collision parts cover the body (no missing walls): their hulls hold its volume.
-    hull_vol = sum(mf.Manifold.hull_points(np.asarray(v, np.float32)).volume() for v, _ in g.collision_parts)
+    hull_vol = sum(
+        mf.Manifold.hull_points(np.asarray(v, np.float32)).volume() for v, _ in g.collision_parts
+    )
     assert hull_vol == pytest.approx(mesh.volume, rel=0.02)
 
 

@@ -11,15 +11,37 @@ from .conftest import run_cli
 
 def test_run_writes_json_lines_and_a_summary(tmp_path):
     out = tmp_path / "r.jsonl"
-    r = run_cli("cfvs_maniskill.run", "--task", "PegInsert3DoF", "--episodes", "2", "--seed", "7", "--out", str(out))
+    r = run_cli(
+        "cfvs_maniskill.run",
+        "--task",
+        "PegInsert3DoF",
+        "--episodes",
+        "2",
+        "--seed",
+        "7",
+        "--out",
+        str(out),
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     assert "success 2/2" in r.stdout and "95% CI" in r.stdout
     rows = [json.loads(line) for line in out.read_text().splitlines()]
     assert [row["seed"] for row in rows] == [7, 8]
     for row in rows:
-        for key in ("task", "agent", "object", "seed", "init_error_m", "success", "servo_time_s", "steps", "reason"):
+        for key in (
+            "task",
+            "agent",
+            "object",
+            "seed",
+            "init_error_m",
+            "success",
+            "servo_time_s",
+            "steps",
+            "reason",
+        ):
             assert key in row
-        assert row["success"] is True and row["agent"] == "oracle" and row["task"] == "PegInsert3DoF"
+        assert (
+            row["success"] is True and row["agent"] == "oracle" and row["task"] == "PegInsert3DoF"
+        )
 
 
 def test_bad_names_exit_2_listing_valid_ones():
@@ -32,7 +54,15 @@ def test_bad_names_exit_2_listing_valid_ones():
 
 
 def test_video_is_a_playable_mp4(tmp_path):
-    r = run_cli("cfvs_maniskill.run", "--task", "PegInsert6DoF-v1", "--episodes", "1", "--video", str(tmp_path))
+    r = run_cli(
+        "cfvs_maniskill.run",
+        "--task",
+        "PegInsert6DoF-v1",
+        "--episodes",
+        "1",
+        "--video",
+        str(tmp_path),
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     videos = list(tmp_path.glob("*.mp4"))
     assert len(videos) == 1
@@ -40,7 +70,12 @@ def test_video_is_a_playable_mp4(tmp_path):
 
     probe = subprocess.run(
         [imageio_ffmpeg.get_ffmpeg_exe(), "-i", str(videos[0]), "-f", "null", "-"],
-        capture_output=True, text=True,
+        capture_output=True,
+        text=True,
     )
-    frames = [int(w.split("=")[1]) for w in probe.stderr.replace("frame= ", "frame=").split() if w.startswith("frame=")]
+    frames = [
+        int(w.split("=")[1])
+        for w in probe.stderr.replace("frame= ", "frame=").split()
+        if w.startswith("frame=")
+    ]
     assert frames and frames[-1] > 20

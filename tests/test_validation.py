@@ -35,10 +35,22 @@ def _open_box_obj(path):
         ("body:\n  box: {size: [0.13, 0.13]}\n", "body.box.size", "list of 3"),
         ("body:\n  box: {size: [0.13, -0.13, 0.07]}\n", "body.box.size", "> 0"),
         ("body:\n  box: {size: 0.1}\n", "body.box.size", "list of 3"),
-        ("body:\n  cylinder: {radius: '7cm', height: 0.07}\n", "body.cylinder.radius", "positive number"),
+        (
+            "body:\n  cylinder: {radius: '7cm', height: 0.07}\n",
+            "body.cylinder.radius",
+            "positive number",
+        ),
         ("body:\n  cylinder: {height: 0.07}\n", "body.cylinder.radius", "missing"),
-        ("body:\n  prism: {sides: 2, radius: 0.07, height: 0.07}\n", "body.prism.sides", "integer >= 3"),
-        ("body:\n  box: {size: [0.1, 0.1, 0.1]}\n  cylinder: {radius: 0.07, height: 0.07}\n", "body", "exactly one"),
+        (
+            "body:\n  prism: {sides: 2, radius: 0.07, height: 0.07}\n",
+            "body.prism.sides",
+            "integer >= 3",
+        ),
+        (
+            "body:\n  box: {size: [0.1, 0.1, 0.1]}\n  cylinder: {radius: 0.07, height: 0.07}\n",
+            "body",
+            "exactly one",
+        ),
         ("body:\n  sphere: {radius: 0.1}\n", "body.sphere", "unknown body kind"),
         ("body:\n  box: {size: [0.1, 0.1, 0.1], colour: 1}\n", "body.box.colour", "unknown field"),
         (BOX + "split: validation\n", "split", "train, test"),
@@ -110,12 +122,24 @@ def test_one_bad_file_never_hides_the_others(tmp_path):
 
 
 def test_assets_check_command_prints_a_table(tmp_path):
-    _write(tmp_path, "split: train\nhole: square\nbody:\n  prism: {sides: 6, radius: 0.07, height: 0.06}\n", "hexagon.yaml")
+    _write(
+        tmp_path,
+        "split: train\nhole: square\nbody:\n  prism: {sides: 6, radius: 0.07, height: 0.06}\n",
+        "hexagon.yaml",
+    )
     _write(tmp_path, "body:\n  box: {size: [0.05, 0.05, 0.05]}\n", "tiny.yaml")
     r = run_cli("cfvs_maniskill.assets", "check", str(tmp_path))
     assert r.returncode == 1, r.stderr
     out = r.stdout
-    for word in ("hexagon", "6-prism", "square 5", "tiny", "mm missing", "pentagonal_prism", "9 ok, 1 with errors"):
+    for word in (
+        "hexagon",
+        "6-prism",
+        "square 5",
+        "tiny",
+        "mm missing",
+        "pentagonal_prism",
+        "9 ok, 1 with errors",
+    ):
         assert word in out, out
     r = run_cli("cfvs_maniskill.assets", "check")
     assert r.returncode == 0 and "8 ok, 0 with errors" in r.stdout

@@ -115,7 +115,9 @@ class PegInsertEnv(BaseEnv):
         # A 2 mm contact offset (ManiSkill's default is 20 mm): with 20 mm, PhysX's
         # speculative contacts between the peg's bottom face and the hole's rim pushed back
         # a perfectly centred peg; a 2 mm offset still catches 10 mm/s at 500 Hz.
-        return SimConfig(sim_freq=500, control_freq=20, scene_config=SceneConfig(contact_offset=0.002))
+        return SimConfig(
+            sim_freq=500, control_freq=20, scene_config=SceneConfig(contact_offset=0.002)
+        )
 
     @property
     def _default_sensor_configs(self):
@@ -124,7 +126,9 @@ class PegInsertEnv(BaseEnv):
     @property
     def _default_human_render_camera_configs(self):
         pose = sapien_utils.look_at(eye=[1.05, 0.55, 0.55], target=[0.45, 0.0, 0.12])
-        return CameraConfig("render_camera", pose=pose, width=256, height=256, fov=0.9, near=0.01, far=10)
+        return CameraConfig(
+            "render_camera", pose=pose, width=256, height=256, fov=0.9, near=0.01, far=10
+        )
 
     def _load_agent(self, options: dict):
         super()._load_agent(options, sapien.Pose())
@@ -170,15 +174,23 @@ class PegInsertEnv(BaseEnv):
         if not np.all(np.isfinite(T)):
             return seed, False
         q, ok, _ = self._pin.compute_inverse_kinematics(
-            self._tcp_index, G.to_pose(T), initial_qpos=np.asarray(seed, np.float64), max_iterations=300
+            self._tcp_index,
+            G.to_pose(T),
+            initial_qpos=np.asarray(seed, np.float64),
+            max_iterations=300,
         )
         if ok:
             self._pin.compute_forward_kinematics(q)
             got = G.to_matrix(self._pin.get_link_pose(self._tcp_index))
-            ok = np.linalg.norm(got[:3, 3] - T[:3, 3]) < 1e-3 and G.rot_angle(got[:3, :3].T @ T[:3, :3]) < 1e-2
+            ok = (
+                np.linalg.norm(got[:3, 3] - T[:3, 3]) < 1e-3
+                and G.rot_angle(got[:3, :3].T @ T[:3, :3]) < 1e-2
+            )
         return np.asarray(q), bool(ok)
 
-    def insertion_pose(self, depth: float, hole: np.ndarray | None = None, ref: np.ndarray | None = None):
+    def insertion_pose(
+        self, depth: float, hole: np.ndarray | None = None, ref: np.ndarray | None = None
+    ):
         """Tcp pose with the tip `depth` m below the hole's opening (negative: above it).
 
         Tool z = -hole z. For a square hole the tool's x is the hole axis (x, y, -x, -y)
@@ -202,7 +214,9 @@ class PegInsertEnv(BaseEnv):
         name = options.get("object")
         if name is not None:
             if name not in self.object_names:
-                raise ValueError(f"unknown object '{name}'; this env has: {', '.join(self.object_names)}")
+                raise ValueError(
+                    f"unknown object '{name}'; this env has: {', '.join(self.object_names)}"
+                )
             idx = self.object_names.index(name)
         else:
             idx = int(rng.integers(len(self.object_names)))
@@ -270,8 +284,12 @@ class PegInsertEnv(BaseEnv):
         tip_to_bottom = float(tip[2] + cfg.hole_depth)
         tilt = float(np.degrees(np.arccos(np.clip(-T[2, 2], -1, 1))))
         room = hole_half_extent(cfg.peg, cfg.clearance) - peg_half_extent(cfg.peg)
-        inside = lateral <= room * np.sqrt(2) + 0.001 and max(abs(tip[0]), abs(tip[1])) <= room + 0.001
-        success = abs(tip_to_bottom) <= SUCCESS_TIP_TOLERANCE and inside and tilt <= SUCCESS_MAX_TILT_DEG
+        inside = (
+            lateral <= room * np.sqrt(2) + 0.001 and max(abs(tip[0]), abs(tip[1])) <= room + 0.001
+        )
+        success = (
+            abs(tip_to_bottom) <= SUCCESS_TIP_TOLERANCE and inside and tilt <= SUCCESS_MAX_TILT_DEG
+        )
         finite = bool(np.all(np.isfinite(T)))
 
         def t(x, dtype=torch.float32):
@@ -289,7 +307,9 @@ class PegInsertEnv(BaseEnv):
     def _get_obs_extra(self, info: dict):
         extra = dict(tcp_pose=self.agent.tcp.pose.raw_pose)
         if self.obs_mode in ("state", "state_dict"):
-            extra["hole_pose"] = torch.as_tensor(_quat_wxyz(self.hole_pose), dtype=torch.float32)[None]
+            extra["hole_pose"] = torch.as_tensor(_quat_wxyz(self.hole_pose), dtype=torch.float32)[
+                None
+            ]
         return extra
 
     def get_obs(self, info: dict | None = None, unflattened: bool = False):

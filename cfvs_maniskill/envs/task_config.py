@@ -69,13 +69,17 @@ def load_task(path: Path) -> TaskConfig:
         if k not in known:
             raise TaskConfigError(path, k, f"unknown key; expected one of {', '.join(known)}")
         if k in ("workspace_x", "workspace_y", "yaw_deg", "tilt_deg"):
-            if not (isinstance(v, list) and len(v) == 2 and all(isinstance(x, int | float) for x in v)):
+            if not (
+                isinstance(v, list) and len(v) == 2 and all(isinstance(x, int | float) for x in v)
+            ):
                 raise TaskConfigError(path, k, f"expected [min, max], got {v!r}")
             v = (float(v[0]), float(v[1]))
         elif k == "objects":
             v = tuple([v] if isinstance(v, str) else v)
         elif k == "init_error":
-            if not isinstance(v, dict) or not all(isinstance(x, int | float) and x > 0 for x in v.values()):
+            if not isinstance(v, dict) or not all(
+                isinstance(x, int | float) and x > 0 for x in v.values()
+            ):
                 raise TaskConfigError(path, k, f"expected a mapping name -> metres, got {v!r}")
             v = {str(a): float(b) for a, b in v.items()}
         kwargs[k] = v
@@ -83,7 +87,9 @@ def load_task(path: Path) -> TaskConfig:
     if cfg.peg not in PEG_PROFILES:
         raise TaskConfigError(path, "peg", f"expected one of {PEG_PROFILES}, got {cfg.peg!r}")
     if not (0 < cfg.clearance < 0.02):
-        raise TaskConfigError(path, "clearance", f"expected 0 < clearance < 0.02 m, got {cfg.clearance}")
+        raise TaskConfigError(
+            path, "clearance", f"expected 0 < clearance < 0.02 m, got {cfg.clearance}"
+        )
     return cfg
 
 

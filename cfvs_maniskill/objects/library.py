@@ -26,9 +26,7 @@ class Library:
 
         `profile` keeps only objects that can host that peg profile.
         """
-        pool = {
-            n: s for n, s in self.specs.items() if profile is None or profile in s.hole
-        }
+        pool = {n: s for n, s in self.specs.items() if profile is None or profile in s.hole}
         chosen: dict[str, HoleSpec] = {}
         for sel in selectors or ["all"]:
             if sel == "all":

@@ -158,10 +158,14 @@ def parse_spec(data: Any, file: Path, raw_text: str = "") -> HoleSpec:
         raise HoleSpecError(file, "<top>", f"expected a mapping of {', '.join(TOP_KEYS)}")
     for k in data:
         if k not in TOP_KEYS:
-            raise HoleSpecError(file, str(k), f"unknown key; expected one of: {', '.join(TOP_KEYS)}")
+            raise HoleSpecError(
+                file, str(k), f"unknown key; expected one of: {', '.join(TOP_KEYS)}"
+            )
     name = data.get("name", file.stem)
     if not isinstance(name, str) or not _NAME_RE.match(name):
-        raise HoleSpecError(file, "name", f"expected a name of letters, digits, _ . -, got {name!r}")
+        raise HoleSpecError(
+            file, "name", f"expected a name of letters, digits, _ . -, got {name!r}"
+        )
     split = data.get("split", "test")
     if split not in SPLITS:
         raise HoleSpecError(file, "split", f"expected one of {', '.join(SPLITS)}, got {split!r}")

@@ -97,7 +97,9 @@ def _link(name: str, geometry: ET.Element | None, z_center: float, mass: float) 
     inertial = ET.SubElement(link, "inertial")
     ET.SubElement(inertial, "mass", value=f"{mass}")
     ET.SubElement(inertial, "origin", xyz=f"0 0 {z_center}", rpy="0 0 0")
-    ET.SubElement(inertial, "inertia", ixx="1e-4", iyy="1e-4", izz="1e-4", ixy="0", ixz="0", iyz="0")
+    ET.SubElement(
+        inertial, "inertia", ixx="1e-4", iyy="1e-4", izz="1e-4", ixy="0", ixz="0", iyz="0"
+    )
     if geometry is not None:
         for tag in ("visual", "collision"):
             el = ET.SubElement(link, tag)
@@ -129,7 +131,10 @@ def build_urdf(profile: str) -> str:
         for vis in link.findall("visual"):
             mesh = vis.find("geometry/mesh")
             if mesh is not None:
-                mesh.set("filename", mesh.get("filename").replace("/visual/", "/collision/").replace(".dae", ".stl"))
+                mesh.set(
+                    "filename",
+                    mesh.get("filename").replace("/visual/", "/collision/").replace(".dae", ".stl"),
+                )
     for mesh in robot.iter("mesh"):
         fn = mesh.get("filename")
         mesh.set("filename", str(src / fn.split("ur_description/", 1)[1]))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import imageio_ffmpeg
 
@@ -73,9 +74,5 @@ def test_video_is_a_playable_mp4(tmp_path):
         capture_output=True,
         text=True,
     )
-    frames = [
-        int(w.split("=")[1])
-        for w in probe.stderr.replace("frame= ", "frame=").split()
-        if w.startswith("frame=")
-    ]
+    frames = [int(n) for n in re.findall(r"frame=\s*(\d+)", probe.stderr)]
     assert frames and frames[-1] > 20

@@ -43,6 +43,10 @@ class ExecutorConfig:
     """Insertion speed along the tool axis, m/s."""
     max_lead: float = 0.004
     """How far the commanded tip may run ahead of the real one during insertion, m."""
+    max_joint_step: float = 0.5
+    """Largest joint change (rad) between waypoints 12.5 mm apart before we call it a flip."""
+    reach_tolerance: float = 0.005
+    """A move that ends further than this (m) from its target is reported as not reached."""
     stall_steps: int = 6
     """Insertion ends when the tip advanced < 0.5 mm over this many steps."""
 
@@ -91,9 +95,13 @@ class Executor:
             return MoveResult(False, "target pose unreachable (no IK solution)")
         path = []
         for i in range(1, n + 1):
+            q_prev = q
             q, ok = self.env.ik(G.interpolate(start, target, i / n), q)
             if not ok:
                 return MoveResult(False, f"path unreachable at {i}/{n} of the way (no IK solution)")
+            if np.abs(q - q_prev).max() > self.cfg.max_joint_step:
+                # IK jumped to another arm configuration: the straight line is not followable.
+                return MoveResult(False, f"path needs an arm configuration flip at {i}/{n}")
             path.append(q)
         steps0 = self.steps
         prev = self.env.agent.robot.get_qpos()[0].cpu().numpy()
@@ -102,6 +110,15 @@ class Executor:
             prev = q
         for _ in range(self.cfg.settle_steps):
             self._step(path[-1])
+        got = self.env.tcp_matrix()
+        err = np.linalg.norm(got[:3, 3] - target[:3, 3])
+        err_rot = np.degrees(G.rot_angle(got[:3, :3].T @ target[:3, :3]))
+        if err > self.cfg.reach_tolerance or err_rot > 3.0:
+            return MoveResult(
+                False,
+                f"target not reached: {1000 * err:.1f} mm, {err_rot:.1f} deg off (blocked by contact?)",
+                self.steps - steps0,
+            )
         return MoveResult(True, "", self.steps - steps0)
 
     def insert(self, depth: float) -> MoveResult:

@@ -159,6 +159,8 @@ class PegInsertEnv(BaseEnv):
         robot = self.agent.robot._objs[0]
         self._pin = robot.create_pinocchio_model()
         # Pinocchio numbers links as the articulation does; ManiSkill prefixes their names.
+        limits = self.agent.robot.get_qlimits()[0].cpu().numpy()
+        self._qlimits = (limits[:, 0], limits[:, 1])
         names = [link.name for link in robot.get_links()]
         self._tcp_index = next(i for i, n in enumerate(names) if n.endswith(TCP_LINK))
 
@@ -179,6 +181,11 @@ class PegInsertEnv(BaseEnv):
             initial_qpos=np.asarray(seed, np.float64),
             max_iterations=300,
         )
+        if ok:
+            # Pinocchio ignores joint limits; bring angles into them by whole turns, or fail.
+            lo, hi = self._qlimits
+            q = np.where(q > hi, q - 2 * np.pi, np.where(q < lo, q + 2 * np.pi, q))
+            ok = bool(np.all((q >= lo) & (q <= hi)))
         if ok:
             self._pin.compute_forward_kinematics(q)
             got = G.to_matrix(self._pin.get_link_pose(self._tcp_index))

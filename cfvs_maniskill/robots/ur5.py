@@ -195,35 +195,17 @@ class _UR5Peg(BaseAgent):
     def _controller_configs(self):
         # Absolute joint targets: the shared executor does IK itself (Pinocchio) and checks
         # that every target was reached, instead of a controller that silently holds.
+        drive = dict(stiffness=STIFFNESS, damping=DAMPING, force_limit=TORQUE_LIMITS.tolist())
+        joints = list(ARM_JOINTS)
         arm = PDJointPosControllerConfig(
-            list(ARM_JOINTS),
-            lower=None,
-            upper=None,
-            stiffness=STIFFNESS,
-            damping=DAMPING,
-            force_limit=TORQUE_LIMITS.tolist(),
-            normalize_action=False,
+            joints, lower=None, upper=None, normalize_action=False, **drive
         )
-        delta = PDJointPosControllerConfig(
-            list(ARM_JOINTS),
-            lower=-0.1,
-            upper=0.1,
-            stiffness=STIFFNESS,
-            damping=DAMPING,
-            force_limit=TORQUE_LIMITS.tolist(),
-            use_delta=True,
-        )
+        delta = PDJointPosControllerConfig(joints, lower=-0.1, upper=0.1, use_delta=True, **drive)
         # Position + velocity targets: the velocity feed-forward removes the lag a pure
         # position drive has (damping/stiffness = 0.1 s), which at 5 cm/s left the peg 1-2 mm
         # off its path, enough to catch the rim of a 4 mm-clearance hole.
         pos_vel = PDJointPosVelControllerConfig(
-            list(ARM_JOINTS),
-            lower=None,
-            upper=None,
-            stiffness=STIFFNESS,
-            damping=DAMPING,
-            force_limit=TORQUE_LIMITS.tolist(),
-            normalize_action=False,
+            joints, lower=None, upper=None, normalize_action=False, **drive
         )
         return deepcopy_dict(
             dict(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import sapien
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
 
 def to_matrix(pose: sapien.Pose) -> np.ndarray:
@@ -54,7 +54,5 @@ def random_cone(rng: np.random.Generator, axis: np.ndarray, half_angle: float) -
 def interpolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     """Straight line in position, slerp in rotation; s in [0, 1]."""
     rots = Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]]))
-    from scipy.spatial.transform import Slerp
-
     R = Slerp([0.0, 1.0], rots)([s]).as_matrix()[0]
     return make(R, (1 - s) * T0[:3, 3] + s * T1[:3, 3])

@@ -110,7 +110,7 @@ def test_same_seed_same_scene_and_outcome(make_env):
     u = env.unwrapped
     ex, agent = Executor(env), OracleAgent(env)
     a = run_episode(env, agent, ex, seed=11)
-    pose_a, q_a = u.hole_pose.copy(), None
+    pose_a = u.hole_pose.copy()
     b = run_episode(env, agent, ex, seed=11)
     assert np.array_equal(pose_a, u.hole_pose)
     da, db = a.to_json(), b.to_json()
@@ -118,7 +118,6 @@ def test_same_seed_same_scene_and_outcome(make_env):
     assert da == db
     env.reset(seed=12)
     assert not np.array_equal(pose_a, u.hole_pose)
-    del q_a
 
 
 @pytest.mark.slow

@@ -11,11 +11,11 @@ from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.registration import register_env
-from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import SceneConfig, SimConfig
+from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.constants import PEG_LENGTH, hole_half_extent, peg_half_extent
+from cfvs_maniskill.constants import hole_half_extent, peg_half_extent
 from cfvs_maniskill.envs.task_config import TaskConfig, load_tasks
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
@@ -258,8 +258,6 @@ class PegInsertEnv(BaseEnv):
         tilt = np.radians(rng.uniform(*cfg.tilt_deg))
         azimuth = rng.uniform(0, 2 * np.pi)
         axis = np.array([np.cos(azimuth), np.sin(azimuth), 0.0])
-        from scipy.spatial.transform import Rotation
-
         R = (Rotation.from_rotvec(axis * tilt) * Rotation.from_euler("z", yaw)).as_matrix()
         v = geom.visual_vertices @ R.T
         xy = [rng.uniform(*cfg.workspace_x), rng.uniform(*cfg.workspace_y)]
@@ -355,4 +353,4 @@ def register_tasks() -> dict[str, TaskConfig]:
     return tasks
 
 
-__all__ = ["PEG_LENGTH", "PegInsertEnv", "Pose", "register_tasks"]
+__all__ = ["PegInsertEnv", "register_tasks"]

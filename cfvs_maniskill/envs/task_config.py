@@ -48,6 +48,13 @@ class TaskConfig:
     """Random rotation of the starting tool about its axis, +- degrees."""
     depth_noise_std: float = 0.001
     """Gaussian noise on the point cloud, metres (paper: N(0, 1 mm^2))."""
+    fine_max_translation: float = 0.03
+    """Fine dataset: largest random tool offset from the pre-insertion pose, metres. Sized to
+    cover what the coarse stage (OAKN) leaves, with margin."""
+    fine_max_tilt_deg: float = 10.0
+    """Fine dataset: largest random tilt of the tool axis, degrees."""
+    fine_max_yaw_deg: float = 15.0
+    """Fine dataset: largest random turn about the tool axis, degrees."""
     camera_width: int = 128
     camera_height: int = 128
     max_episode_steps: int = 1500

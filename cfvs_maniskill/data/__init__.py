@@ -1,0 +1,1 @@
+"""CFVS training data: coarse (OAKN) and fine (OPN) datasets, labels, augmentation, HDF5 files."""

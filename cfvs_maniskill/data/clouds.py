@@ -1,0 +1,82 @@
+"""Point-cloud preprocessing shared by data collection and the agents, so both see the same.
+
+The wrist cloud arrives in the world frame with w = 0 for empty pixels. Every network here
+reads it in the **tool frame** (the peg-tip `tcp` frame, z along the peg): the camera is
+fixed to the tool, so this is the camera's own view up to a constant transform, and labels
+(keypoints, offsets, actions) become functions of the observation alone. The robot knows its
+table and its peg, so their points carry no information about the hole and are dropped
+before sampling; what is left is the hole object, at full point budget.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cfvs_maniskill.constants import PEG_LENGTH, peg_half_extent
+
+TABLE_MARGIN = 0.006
+"""Points below this world height are the table (its top is z = 0; 6 sigma of 1 mm noise)."""
+PEG_MARGIN = 0.004
+"""Points within this distance of the peg's known volume are the peg itself."""
+MAX_RANGE = 0.5
+"""Points further than this from the tool are beyond any hole the task places (init error
+<= 30 cm plus the object): the far robot base and table edges, dropped."""
+FINE_CROP_RADIUS = 0.08
+"""Fine stage: keep points within this distance of the tool axis ..."""
+FINE_CROP_Z = (-0.02, 0.14)
+"""... and between these heights along it (tool frame; the hole is ~3 cm ahead of the tip)."""
+
+
+def valid_world_points(xyzw: np.ndarray) -> np.ndarray:
+    """(M, 4) or (1, M, 4) xyzw -> (K, 3) world points that saw something."""
+    x = np.asarray(xyzw, dtype=np.float32).reshape(-1, 4)
+    keep = (x[:, 3] > 0) & np.all(np.isfinite(x[:, :3]), axis=1)
+    return x[keep, :3]
+
+
+def world_to_tool(points: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+    """World points (K, 3) -> tool frame of the 4x4 tcp pose."""
+    R, t = tcp[:3, :3], tcp[:3, 3]
+    return ((points - t) @ R).astype(np.float32)
+
+
+def tool_to_world(points: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+    return (points @ tcp[:3, :3].T + tcp[:3, 3]).astype(np.float32)
+
+
+def object_points(xyzw: np.ndarray, tcp: np.ndarray, peg: str) -> np.ndarray:
+    """Tool-frame points of everything but the table and the peg."""
+    world = valid_world_points(xyzw)
+    world = world[world[:, 2] > TABLE_MARGIN]
+    p = world_to_tool(world, tcp)
+    p = p[np.linalg.norm(p, axis=1) <= MAX_RANGE]
+    half = peg_half_extent(peg) + PEG_MARGIN
+    if peg == "round":
+        across = np.hypot(p[:, 0], p[:, 1]) <= half
+    else:
+        across = (np.abs(p[:, 0]) <= half) & (np.abs(p[:, 1]) <= half)
+    on_peg = across & (p[:, 2] >= -PEG_LENGTH - PEG_MARGIN) & (p[:, 2] <= PEG_MARGIN)
+    return p[~on_peg]
+
+
+def fine_crop(points: np.ndarray) -> np.ndarray:
+    """The paper's crop around the end-effector: tool-frame points near the tool axis."""
+    r = np.hypot(points[:, 0], points[:, 1])
+    z = points[:, 2]
+    return points[(r <= FINE_CROP_RADIUS) & (z >= FINE_CROP_Z[0]) & (z <= FINE_CROP_Z[1])]
+
+
+def sample_fixed(points: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Exactly n points: a random subset, or all of them plus random repeats if too few.
+
+    Raises ValueError on an empty cloud (the camera saw no object): there is nothing to learn
+    from or act on, and callers turn that into a clear failure.
+    """
+    k = len(points)
+    if k == 0:
+        raise ValueError("the cloud has no object points (camera sees no hole object)")
+    if k >= n:
+        idx = rng.choice(k, n, replace=False)
+    else:
+        idx = np.concatenate([np.arange(k), rng.choice(k, n - k, replace=True)])
+    return points[idx]

@@ -1,0 +1,248 @@
+"""Collect the coarse (OAKN) and fine (OPN) datasets in the simulator (paper: Data generation).
+
+Sample i is drawn from its own generator seeded by (seed, i) -- the scene, the object, the
+start and the perturbation -- so a resumed collection continues exactly where it stopped.
+
+* coarse: the peg at the task's initial configuration, 15-30 cm (the task's init_error
+  range) from a randomly placed hole object; the cloud, keypoints, offsets, confidence.
+* fine: the peg at the true pre-insertion pose moved by a random tool-frame offset
+  (-dt, -dtheta, ranges from the task file); the cropped cloud and the action (dt, dtheta)
+  that undoes it. The robot is set to the perturbed pose directly (no motion is needed to
+  render what the camera would see there).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from cfvs_maniskill import geometry as G
+from cfvs_maniskill.data import labels as L
+from cfvs_maniskill.data import store
+from cfvs_maniskill.data.clouds import fine_crop, object_points, sample_fixed, world_to_tool
+from cfvs_maniskill.data.procedural import procedural_specs
+from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+
+GROUP_SIZE = 12
+"""Procedural bodies per simulator scene; the scene is rebuilt for the next group."""
+BLOCK = 240
+"""Consecutive samples drawn from one group of objects."""
+CHUNK = 40
+"""Samples per crash-safe chunk file."""
+
+
+@dataclass
+class CollectArgs:
+    """Collect a CFVS dataset (HDF5). Resumes if FILE or its FILE.parts/ exist."""
+
+    task: str = "PegInsert6DoF"
+    """Task name (a file in tasks/)."""
+    kind: str = "coarse"
+    """coarse (OAKN: keypoints + confidence) or fine (OPN: actions)."""
+    samples: int = 2000
+    """Total number of samples the file should hold."""
+    out: Path = Path("data/coarse.h5")
+    """Output HDF5 file."""
+    objects: tuple[str, ...] = ("train",)
+    """Hole objects (names or splits). Training data never uses the test split by default."""
+    procedural: bool = False
+    """Also use procedurally varied training bodies (boxes, cylinders, prisms)."""
+    procedural_count: int = 240
+    """How many procedural bodies (with --procedural)."""
+    points: int = 1024
+    """Points per sample after sampling (fixed N)."""
+    seed: int = 0
+    """Base seed: sample i is drawn from (seed, i)."""
+    assets: tuple[str, ...] = ()
+    """Extra hole-object folders or files."""
+
+
+def file_attrs(args: CollectArgs, task) -> dict:
+    return {
+        "format": store.FORMAT,
+        "kind": args.kind,
+        "task": args.task,
+        "peg": task.peg,
+        "num_points": args.points,
+        "seed": args.seed,
+        "objects": json.dumps(list(args.objects)),
+        "procedural": args.procedural_count if args.procedural else 0,
+        "frame": "tool",
+        "units": "metres, radians",
+        "keypoint_spacing": L.KEYPOINT_SPACING,
+        "confidence_sigma": L.CONFIDENCE_SIGMA,
+        "config": json.dumps({k: str(v) for k, v in dataclasses.asdict(args).items()}),
+        "task_config": json.dumps(dataclasses.asdict(task)),
+    }
+
+
+class Collector:
+    """Owns the simulator scene(s) and draws sample i on demand."""
+
+    def __init__(self, args: CollectArgs, task):
+        from cfvs_maniskill.objects.library import load_library
+
+        self.args, self.task = args, task
+        self.assets = list(args.assets)
+        lib = load_library(self.assets)
+        base = [s.name for s in lib.select(list(args.objects), profile=task.peg)]
+        self.groups: list[list[str]] = [base]
+        if args.procedural:
+            folder, names = procedural_specs(
+                args.procedural_count, args.seed, task.peg, task.clearance, task.hole_depth
+            )
+            self.assets.append(str(folder))
+            groups = [names[i : i + GROUP_SIZE] for i in range(0, len(names), GROUP_SIZE)]
+            # Every scene also holds the named objects, so they stay in the mix.
+            self.groups = [base + g for g in groups]
+        self.env = None
+        self.group = -1
+
+    def _env_for(self, group: int):
+        import gymnasium as gym
+
+        if group != self.group:
+            if self.env is not None:
+                self.env.close()
+            self.env = gym.make(
+                f"{self.args.task}-v1",
+                obs_mode="pointcloud",
+                objects=tuple(self.groups[group]),
+                assets=tuple(self.assets),
+            )
+            self.group = group
+        return self.env
+
+    def sample(self, i: int, draw: int = 0) -> dict[str, np.ndarray] | None:
+        """Sample i (its `draw`-th attempt), or None if that draw gave no usable view."""
+        args, task = self.args, self.task
+        rng = np.random.default_rng([args.seed, i, draw])
+        group = (i // BLOCK) % len(self.groups)
+        env = self._env_for(group)
+        u = env.unwrapped
+        names = self.groups[group]
+        obj = names[int(rng.integers(len(names)))]
+        lo, hi = min(task.init_error.values()), max(task.init_error.values())
+        u.init_error_m = float(rng.uniform(lo, hi))
+        obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)), options={"object": obj})
+        H = u.hole_pose.copy()
+        if args.kind == "coarse":
+            return self._coarse(u, obs, H, rng, i)
+        return self._fine(u, H, rng, i)
+
+    def _common(self, u, points, tcp, H, i):
+        return {
+            "points": points.astype(np.float32),
+            "tcp_pose": tcp,
+            "hole_pose": H,
+            "object": np.array(u.episode_info["object"]),
+            "sample_index": np.array(i, dtype=np.int64),
+        }
+
+    def _coarse(self, u, obs, H, rng, i):
+        tcp = u.tcp_matrix()
+        pts = object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, self.task.peg)
+        if len(pts) < 32:
+            return None  # the camera hardly sees the object: redraw
+        pts = sample_fixed(pts, self.args.points, rng)
+        k = world_to_tool(L.keypoints_world(H, tcp, self.task.peg), tcp)
+        row = self._common(u, pts, tcp, H, i)
+        row.update(
+            keypoints=k.astype(np.float32),
+            offsets=L.offsets(pts, k),
+            confidence=L.confidence(pts, k[0]),
+            init_error=np.array(np.linalg.norm(tcp[:3, 3] - H[:3, 3]), dtype=np.float32),
+        )
+        return row
+
+    def _fine(self, u, H, rng, i):
+        task = self.task
+        q_seed = u.agent.robot.get_qpos()[0].numpy()
+        T0 = u.insertion_pose(-PRE_INSERT_HEIGHT, H)
+        for _ in range(50):
+            offset = L.random_offset(
+                rng, task.fine_max_translation, task.fine_max_tilt_deg, task.fine_max_yaw_deg
+            )
+            Tp = T0 @ G.inv(offset)  # the paper's "-dt, -dtheta" from the true pose
+            tip_in_hole = G.inv(H) @ Tp
+            if tip_in_hole[2, 3] < 0.005:
+                continue  # the tip would be inside the object: not a pose the servo visits
+            q, ok = u.ik(Tp, q_seed)
+            if ok:
+                break
+        else:
+            return None
+        u.agent.reset(torch.as_tensor(q, dtype=torch.float32)[None])
+        obs = u.get_obs()
+        tcp = u.tcp_matrix()  # what the robot really reached (IK is exact to < 1 mm)
+        target = u.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp)
+        pts = fine_crop(object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, task.peg))
+        if len(pts) < 32:
+            return None  # the crop sees (almost) nothing: not a useful sample
+        pts = sample_fixed(pts, self.args.points, rng)
+        row = self._common(u, pts, tcp, H, i)
+        row.update(action=L.fine_action(tcp, target), target_pose=target)
+        return row
+
+    def close(self):
+        if self.env is not None:
+            self.env.close()
+
+
+def collect(args: CollectArgs) -> int:
+    """Collect until `args.out` holds `args.samples` samples; return the count."""
+    from cfvs_maniskill.envs.task_config import TaskConfigError, load_tasks
+
+    if args.kind not in ("coarse", "fine"):
+        raise store.DatasetError(f"--kind: expected coarse or fine, got {args.kind!r}")
+    tasks = load_tasks()
+    if args.task not in tasks:
+        raise TaskConfigError(args.task, "task", f"unknown task; valid: {', '.join(tasks)}")
+    task = tasks[args.task]
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    attrs = file_attrs(args, task)
+    have = store.existing_count(out, attrs)
+    if have >= args.samples:
+        if store.parts_dir(out).exists():
+            have = store.finalize(out, attrs)
+        return have
+    store.start_parts(out, attrs)
+    collector = Collector(args, task)
+    rows: list[dict] = []
+    first = have
+    t0 = time.perf_counter()
+    bar = tqdm(total=args.samples, initial=have, unit="sample", desc=f"{args.kind} {args.task}")
+    try:
+        i = have
+        while i < args.samples:
+            row = _draw(collector, i)
+            rows.append(row)
+            i += 1
+            bar.update(1)
+            if len(rows) == CHUNK or i == args.samples:
+                store.write_part(out, first, {k: np.stack([r[k] for r in rows]) for k in rows[0]})
+                first, rows = i, []
+    finally:
+        bar.close()
+        collector.close()
+    n = store.finalize(out, attrs)
+    rate = (n - have) / max(time.perf_counter() - t0, 1e-9)
+    print(f"{out}: {n} samples ({rate:.1f} samples/s this run)")
+    return n
+
+
+def _draw(collector: Collector, i: int) -> dict:
+    """Sample i: the first usable of its deterministic draws 0, 1, 2, ..."""
+    for draw in range(100):
+        row = collector.sample(i, draw)
+        if row is not None:
+            return row
+    raise RuntimeError(f"sample {i}: no usable view in 100 draws")

@@ -1,0 +1,97 @@
+"""Ground-truth labels from true poses: OAKN's keypoints, offsets and confidence, OPN's actions.
+
+All labels are in the tool frame at capture time (see `clouds.py`).
+
+Keypoints (paper, OAKN): k1 the hole's centre on its top face, k2 = k1 + s * x_hole,
+k3 = k1 + s * z_hole (z out of the hole), s = `KEYPOINT_SPACING`. A square hole has four
+equally valid x axes and a round one infinitely many; a label must be a function of what
+the camera sees, so x_hole is the one closest to the tool's own x axis -- the axis the
+executor would turn the peg to anyway (`PegInsertEnv.insertion_pose`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from cfvs_maniskill import geometry as G
+
+KEYPOINT_SPACING = 0.05
+"""Distance of k2 and k3 from k1, metres."""
+CONFIDENCE_SIGMA = 0.03
+"""sigma of the confidence target w* = exp(-|x - p|^2 / 2 sigma^2), metres."""
+
+
+def canonical_hole_frame(hole: np.ndarray, tcp: np.ndarray, peg: str) -> np.ndarray:
+    """The hole's world pose with its x axis the symmetric choice nearest the tool's x."""
+    z = hole[:3, 2]
+    x_tool = tcp[:3, 0]
+    if peg == "square":
+        cands = [hole[:3, 0], hole[:3, 1], -hole[:3, 0], -hole[:3, 1]]
+        x = max(cands, key=lambda c: float(c @ x_tool))
+    else:
+        x = x_tool
+    return G.make(G.frame_with_z(z, x), hole[:3, 3])
+
+
+def keypoints_world(hole: np.ndarray, tcp: np.ndarray, peg: str) -> np.ndarray:
+    """(3, 3) rows k1, k2, k3 in the world frame."""
+    H = canonical_hole_frame(hole, tcp, peg)
+    k1 = H[:3, 3]
+    return np.stack([k1, k1 + KEYPOINT_SPACING * H[:3, 0], k1 + KEYPOINT_SPACING * H[:3, 2]])
+
+
+def offsets(points: np.ndarray, keypoints: np.ndarray) -> np.ndarray:
+    """(N, 3, 3): offsets[i, j] = k_j - x_i, so x_i + offsets[i, j] = k_j exactly."""
+    return (keypoints[None, :, :] - points[:, None, :]).astype(np.float32)
+
+
+def confidence(points: np.ndarray, centre: np.ndarray, sigma: float = CONFIDENCE_SIGMA):
+    """(N,) w* = exp(-|x - p|^2 / 2 sigma^2) around the hole's centre p."""
+    d2 = np.sum((points - centre) ** 2, axis=-1)
+    return np.exp(-d2 / (2 * sigma**2)).astype(np.float32)
+
+
+def hole_frame_from_keypoints(k: np.ndarray) -> np.ndarray:
+    """The paper's Algorithm 1 (compute_rot_mat) plus the position: 4x4 hole frame."""
+    vx, vz = k[1] - k[0], k[2] - k[0]
+    vz = vz / np.linalg.norm(vz)
+    vy = np.cross(vz, vx)
+    vy = vy / np.linalg.norm(vy)
+    vx = np.cross(vy, vz)
+    return G.make(np.stack([vx, vy, vz], axis=1), k[0])
+
+
+def fine_action(tcp: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """OPN's label: (dt, dr) such that target = tcp @ [rotvec(dr) | dt] (tool frame).
+
+    The paper writes Algorithm 2 as R' = dR R, t' = dt + t in the world; the network sees
+    a tool-frame cloud, so we express the same offset in the tool frame, where it is a
+    function of the observation. dr is a rotation vector (radians), not Euler angles: for
+    the small offsets here they agree to first order and it has no gimbal order to choose.
+    """
+    D = G.inv(tcp) @ target
+    dr = Rotation.from_matrix(D[:3, :3]).as_rotvec()
+    return np.concatenate([D[:3, 3], dr]).astype(np.float32)
+
+
+def apply_action(tcp: np.ndarray, action: np.ndarray) -> np.ndarray:
+    """The inverse of `fine_action`: the pose OPN's (dt, dr) asks for."""
+    D = G.make(Rotation.from_rotvec(action[3:6]).as_matrix(), action[:3])
+    return tcp @ D
+
+
+def random_offset(
+    rng: np.random.Generator, max_translation: float, max_tilt_deg: float, max_yaw_deg: float
+) -> np.ndarray:
+    """A random 4x4 tool-frame offset: translation of uniform length in any direction,
+    rotation about the tool axis (yaw) and about an axis across it (tilt), uniform angles.
+    Uniform lengths (not uniform in the ball) keep many small offsets, which the last fine
+    iterations need most."""
+    d = rng.normal(size=3)
+    t = d / np.linalg.norm(d) * rng.uniform(0, max_translation)
+    phi = rng.uniform(0, 2 * np.pi)
+    tilt = np.radians(rng.uniform(0, max_tilt_deg)) * np.array([np.cos(phi), np.sin(phi), 0.0])
+    yaw = np.radians(rng.uniform(-max_yaw_deg, max_yaw_deg))
+    R = Rotation.from_rotvec(tilt).as_matrix() @ Rotation.from_rotvec([0, 0, yaw]).as_matrix()
+    return G.make(R, t)

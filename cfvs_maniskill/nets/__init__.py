@@ -1,0 +1,1 @@
+"""The CFVS networks: a pure-torch PointNet++ backbone, OAKN (coarse) and OPN (fine)."""

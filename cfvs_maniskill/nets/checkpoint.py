@@ -1,0 +1,79 @@
+"""Weights files: one torch file per network with everything needed to trust it.
+
+A weights file holds the state dict plus: which network (oakn | opn), its architecture
+config, the task and peg profile of its training data, the data file's sha256, the
+training arguments, the validation metrics and the wall time. Loading checks all of it
+and says exactly what is wrong with a file that does not fit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from cfvs_maniskill.nets.oakn import OAKN, OAKNConfig
+from cfvs_maniskill.nets.opn import OPN, OPNConfig
+
+NETS = {"oakn": (OAKN, OAKNConfig), "opn": (OPN, OPNConfig)}
+WEIGHTS_FORMAT = "cfvs_maniskill.weights/1"
+
+
+class WeightsError(ValueError):
+    """A weights file that cannot be used; the message names the file and what it holds."""
+
+
+def file_sha256(path: Path, limit: int | None = None) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 23):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def build(net: str, config: dict[str, Any]):
+    cls, cfg_cls = NETS[net]
+    known = {f.name for f in dataclasses.fields(cfg_cls)}
+    kw = {k: tuple(v) if isinstance(v, list) else v for k, v in config.items() if k in known}
+    return cls(cfg_cls(**kw))
+
+
+def save_atomic(obj: dict, path: Path) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def load_weights(path: Path | str, net: str, peg: str | None = None):
+    """(model in eval mode, metadata) from a weights file, checked against what we need."""
+    path = Path(path)
+    if not path.is_file():
+        raise WeightsError(f"{path}: weights file not found (expected a trained {net} file)")
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as e:  # truncated / not a torch file: torch raises many types
+        raise WeightsError(f"{path}: not a readable weights file ({type(e).__name__}: {e})") from e
+    if not isinstance(blob, dict) or blob.get("format") != WEIGHTS_FORMAT:
+        raise WeightsError(f"{path}: not a cfvs_maniskill weights file (format {WEIGHTS_FORMAT})")
+    if blob.get("net") != net:
+        raise WeightsError(
+            f"{path}: holds a {blob.get('net')} network (task {blob.get('task')}), expected {net}"
+        )
+    if peg is not None and blob.get("peg") != peg:
+        raise WeightsError(
+            f"{path}: trained for a {blob.get('peg')} peg (task {blob.get('task')}), "
+            f"this task uses a {peg} peg"
+        )
+    model = build(net, blob["config"])
+    try:
+        model.load_state_dict(blob["state_dict"])
+    except RuntimeError as e:
+        raise WeightsError(f"{path}: weights do not fit the {net} architecture: {e}") from e
+    model.eval()
+    return model, blob

@@ -1,0 +1,73 @@
+"""OPN, the offsets prediction network (paper, section OPN).
+
+The cloud cropped around the end-effector (tool frame, not centred: the tool's origin is
+the reference the offsets are measured from) -> PointNet++ global feature -> MLP ->
+dt (3, metres) and dr (3, rotation vector, radians), the tool-frame offset to the
+pre-insertion pose (`data.labels.fine_action`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from cfvs_maniskill.nets.pointnet2 import GlobalAbstraction, SetAbstraction, mlp
+
+POINT_SCALE = 10.0
+"""Coordinates enter in decimetres."""
+DT_UNIT = 0.01
+"""dt is predicted in centimetres ..."""
+DR_UNIT = 0.1
+"""... and dr in tenths of a radian (5.7 deg), so both are O(1)."""
+
+
+@dataclass(frozen=True)
+class OPNConfig:
+    sa1_centres: int = 256
+    sa1_radii: tuple[float, ...] = (0.015,)
+    """Ball radii of the first set abstraction, metres (several = MSG)."""
+    sa1_k: tuple[int, ...] = (16,)
+    sa2_centres: int = 64
+    sa2_radius: float = 0.04
+    sa2_k: int = 16
+    width: int = 64
+
+
+class OPN(nn.Module):
+    def __init__(self, cfg: OPNConfig = OPNConfig()):
+        super().__init__()
+        self.cfg = cfg
+        w, s = cfg.width, POINT_SCALE
+        self.sa1 = SetAbstraction(
+            cfg.sa1_centres,
+            [r * s for r in cfg.sa1_radii],
+            cfg.sa1_k,
+            0,
+            [[w // 2, w // 2, w]] * len(cfg.sa1_radii),
+        )
+        self.sa2 = SetAbstraction(
+            cfg.sa2_centres, [cfg.sa2_radius * s], [cfg.sa2_k], self.sa1.out_ch, [[w, w, 2 * w]]
+        )
+        self.glob = GlobalAbstraction(self.sa2.out_ch, [2 * w, 4 * w])
+        self.head = nn.Sequential(mlp([4 * w, 2 * w, w]), nn.Linear(w, 6))
+
+    def forward(self, points: Tensor) -> Tensor:
+        """points (B, N, 3) metres, tool frame -> (B, 6): dt metres, dr radians."""
+        x = points * POINT_SCALE
+        c1, f1 = self.sa1(x, None)
+        c2, f2 = self.sa2(c1, f1)
+        out = self.head(self.glob(c2, f2))
+        return torch.cat([out[:, :3] * DT_UNIT, out[:, 3:] * DR_UNIT], dim=1)
+
+
+def opn_loss(pred: Tensor, gt: Tensor) -> tuple[Tensor, dict[str, float]]:
+    """Paper: L = RMSE(dt) + (1 - cos(dt, dt*)) + RMSE(dr), RMSEs in network units."""
+    dt, dt_gt = pred[:, :3] / DT_UNIT, gt[:, :3] / DT_UNIT
+    dr, dr_gt = pred[:, 3:] / DR_UNIT, gt[:, 3:] / DR_UNIT
+    l_t = torch.sqrt(((dt - dt_gt) ** 2).sum(dim=1).mean() + 1e-12)
+    l_cos = (1 - F.cosine_similarity(dt, dt_gt, dim=1, eps=1e-6)).mean()
+    l_r = torch.sqrt(((dr - dr_gt) ** 2).sum(dim=1).mean() + 1e-12)
+    return l_t + l_cos + l_r, {"l_trans": float(l_t), "l_cos": float(l_cos), "l_rot": float(l_r)}

@@ -1,0 +1,279 @@
+"""Train OAKN or OPN on CPU: `python -m cfvs_maniskill.train --net oakn|opn --data FILE`.
+
+Resumable: the full training state is saved after every epoch to OUT.resume; a restarted
+run with the same arguments continues from the last finished epoch. At the end OUT holds
+the weights with their config, data hash, validation metrics and wall time, and
+OUT.json the same metadata for people.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import tyro
+from tqdm import tqdm
+
+from cfvs_maniskill.data import labels as L
+from cfvs_maniskill.data.augment import AugmentConfig, augment
+from cfvs_maniskill.data.store import DatasetError, load
+from cfvs_maniskill.nets.checkpoint import WEIGHTS_FORMAT, build, file_sha256, save_atomic
+from cfvs_maniskill.nets.oakn import OAKNConfig, oakn_loss, weighted_keypoints
+from cfvs_maniskill.nets.opn import OPNConfig, opn_loss
+from cfvs_maniskill.nets.pointnet2 import seed_sampling
+
+
+@dataclass
+class TrainArgs:
+    """Train a CFVS network (OAKN on a coarse dataset, OPN on a fine one) on the CPU."""
+
+    net: str = "oakn"
+    """oakn (coarse keypoints) or opn (fine offsets)."""
+    data: Path = Path("data/coarse.h5")
+    """Dataset file from `python -m cfvs_maniskill.data collect`."""
+    out: Path = Path("agents/cfvs/oakn.pt")
+    """Weights file to write."""
+    epochs: int = 12
+    batch: int = 16
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    points: int = 0
+    """Points per cloud fed to the net (a fresh random subset each time); 0: 512 for oakn,
+    1024 for opn."""
+    augment: bool = True
+    """The paper's scaling / bending augmentation, on the fly (--no-augment: ablation)."""
+    val_fraction: float = 0.05
+    """The last samples of the file, held out for validation metrics."""
+    threads: int = 0
+    """torch threads (0: all cores)."""
+    seed: int = 0
+    max_minutes: float = 0.0
+    """Stop (resumably) after this much wall time; 0 = no limit."""
+
+
+def _points_default(args: TrainArgs) -> int:
+    return args.points or (512 if args.net == "oakn" else 1024)
+
+
+class Batches:
+    """Samples -> tensors, with random point subsets and augmentation when training."""
+
+    def __init__(
+        self, data: dict, net: str, n_points: int, sigma: float, aug: AugmentConfig | None
+    ):
+        self.d, self.net, self.n, self.sigma, self.aug = data, net, n_points, sigma, aug
+
+    def make(self, idx: np.ndarray, rng: np.random.Generator) -> dict[str, torch.Tensor]:
+        pts = []
+        keys = self.d["keypoints"][idx] if self.net == "oakn" else None
+        for j, i in enumerate(idx):
+            p = self.d["points"][i]
+            sel = rng.choice(len(p), self.n, replace=len(p) < self.n)
+            p = p[sel]
+            if self.aug is not None:
+                k = keys[j] if keys is not None else _keypoints_from_action(self.d["action"][i])
+                p, _ = augment(p, k, rng, self.aug)
+            pts.append(p)
+        out = {"points": torch.from_numpy(np.stack(pts).astype(np.float32))}
+        if self.net == "oakn":
+            k = torch.from_numpy(keys.astype(np.float32))
+            x = out["points"]
+            out["keypoints"] = k
+            out["offsets"] = k[:, None, :, :] - x[:, :, None, :]
+            out["confidence"] = torch.exp(-((x - k[:, None, 0]) ** 2).sum(-1) / (2 * self.sigma**2))
+        else:
+            out["action"] = torch.from_numpy(self.d["action"][idx].astype(np.float32))
+        return out
+
+
+def _keypoints_from_action(action: np.ndarray) -> np.ndarray:
+    """Fine samples: the hole frame in the tool frame, from the action to the pre-insertion
+    pose (the hole's centre is PRE_INSERT_HEIGHT ahead of that tool, x along tool x)."""
+    from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+
+    T = L.apply_action(np.eye(4), action)
+    c = T[:3, 3] + PRE_INSERT_HEIGHT * T[:3, 2]
+    s = L.KEYPOINT_SPACING
+    return np.stack([c, c + s * T[:3, 0], c - s * T[:3, 2]])
+
+
+def _angle_deg(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    cos = torch.nn.functional.cosine_similarity(a, b, dim=-1).clamp(-1, 1)
+    return torch.rad2deg(torch.acos(cos))
+
+
+@torch.no_grad()
+def validate(model, batches: Batches, idx: np.ndarray, net: str) -> dict[str, float]:
+    model.eval()
+    rng = np.random.default_rng(123)
+    errs: dict[str, list[np.ndarray]] = {}
+    for a in range(0, len(idx), 32):
+        b = batches.make(idx[a : a + 32], rng)
+        if net == "oakn":
+            off, logit = model(b["points"])
+            k, _ = weighted_keypoints(b["points"], off, torch.sigmoid(logit))
+            gt = b["keypoints"]
+            e = {
+                "k1_mm": 1000 * (k[:, 0] - gt[:, 0]).norm(dim=-1),
+                "axis_deg": _angle_deg(k[:, 2] - k[:, 0], gt[:, 2] - gt[:, 0]),
+                "xdir_deg": _angle_deg(k[:, 1] - k[:, 0], gt[:, 1] - gt[:, 0]),
+            }
+        else:
+            pred, gt = model(b["points"]), b["action"]
+            e = {
+                "dt_mm": 1000 * (pred[:, :3] - gt[:, :3]).norm(dim=-1),
+                "dr_deg": torch.rad2deg((pred[:, 3:] - gt[:, 3:]).norm(dim=-1)),
+                "dt_zero_mm": 1000 * gt[:, :3].norm(dim=-1),
+            }
+        for key, v in e.items():
+            errs.setdefault(key, []).append(v.numpy())
+    model.train()
+    out = {}
+    for key, v in errs.items():
+        v = np.concatenate(v)
+        out[f"{key}_mean"] = float(v.mean())
+        out[f"{key}_p90"] = float(np.percentile(v, 90))
+    return out
+
+
+def train(args: TrainArgs) -> dict:
+    if args.net not in ("oakn", "opn"):
+        raise DatasetError(f"--net: expected oakn or opn, got {args.net!r}")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    kind = "coarse" if args.net == "oakn" else "fine"
+    fields = ("points", "keypoints") if args.net == "oakn" else ("points", "action")
+    attrs, data = load(args.data, fields)
+    if attrs.get("kind") != kind:
+        raise DatasetError(
+            f"{args.data}: field 'kind': {args.net} trains on a {kind} dataset, "
+            f"this file is {attrs.get('kind')}"
+        )
+    sha = file_sha256(args.data)
+    m = len(data["points"])
+    n_val = max(1, int(m * args.val_fraction))
+    train_idx, val_idx = np.arange(m - n_val), np.arange(m - n_val, m)
+    n_points = _points_default(args)
+    net_cfg = OAKNConfig() if args.net == "oakn" else OPNConfig()
+    batches = Batches(
+        data,
+        args.net,
+        n_points,
+        float(attrs["confidence_sigma"]),
+        AugmentConfig() if args.augment else None,
+    )
+    torch.manual_seed(args.seed)
+    seed_sampling(args.seed)
+    model = build(args.net, dataclasses.asdict(net_cfg))
+    opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
+    steps_per_epoch = math.ceil(len(train_idx) / args.batch)
+    sched = torch.optim.lr_scheduler.OneCycleLR(
+        opt, max_lr=args.lr, total_steps=args.epochs * steps_per_epoch, pct_start=0.1
+    )
+    resume_path = args.out.with_name(args.out.name + ".resume")
+    run_key = {
+        k: str(v)
+        for k, v in dataclasses.asdict(args).items()
+        if k not in ("max_minutes", "threads")
+    }
+    state = {"epoch": 0, "history": [], "wall_s": 0.0}
+    if resume_path.exists():
+        blob = torch.load(resume_path, map_location="cpu", weights_only=False)
+        if blob["run_key"] != run_key or blob["data_sha256"] != sha:
+            raise DatasetError(
+                f"{resume_path}: a resume state from other arguments or data; "
+                "delete it or use another --out"
+            )
+        model.load_state_dict(blob["state_dict"])
+        opt.load_state_dict(blob["optimizer"])
+        sched.load_state_dict(blob["scheduler"])
+        state = blob["state"]
+        print(f"resuming {args.out} after epoch {state['epoch']}")
+    t_start = time.perf_counter() - state["wall_s"]
+    t_session = time.perf_counter()
+    model.train()
+    for epoch in range(state["epoch"], args.epochs):
+        rng = np.random.default_rng([args.seed, epoch])
+        order = rng.permutation(train_idx)
+        bar = tqdm(
+            range(steps_per_epoch), desc=f"{args.net} epoch {epoch + 1}/{args.epochs}", unit="batch"
+        )
+        for s in bar:
+            b = batches.make(order[s * args.batch : (s + 1) * args.batch], rng)
+            if args.net == "oakn":
+                off, logit = model(b["points"])
+                loss, parts = oakn_loss(off, logit, b["offsets"], b["confidence"])
+            else:
+                loss, parts = opn_loss(model(b["points"]), b["action"])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            if s % 10 == 0:
+                bar.set_postfix(
+                    loss=f"{float(loss):.3f}", **{k: f"{v:.3f}" for k, v in parts.items()}
+                )
+        metrics = validate(model, batches, val_idx, args.net)
+        state = {
+            "epoch": epoch + 1,
+            "history": [*state["history"], {"epoch": epoch + 1, **metrics}],
+            "wall_s": time.perf_counter() - t_start,
+        }
+        print(f"epoch {epoch + 1}: " + ", ".join(f"{k} {v:.2f}" for k, v in metrics.items()))
+        save_atomic(
+            {
+                "run_key": run_key,
+                "data_sha256": sha,
+                "state_dict": model.state_dict(),
+                "optimizer": opt.state_dict(),
+                "scheduler": sched.state_dict(),
+                "state": state,
+            },
+            resume_path,
+        )
+        if args.max_minutes and time.perf_counter() - t_session > 60 * args.max_minutes:
+            print(f"stopped after {args.max_minutes} min; run the same command to resume")
+            return state
+    meta = {
+        "format": WEIGHTS_FORMAT,
+        "net": args.net,
+        "task": attrs["task"],
+        "peg": attrs["peg"],
+        "config": dataclasses.asdict(net_cfg),
+        "points": n_points,
+        "data": str(args.data),
+        "data_sha256": sha,
+        "data_samples": m,
+        "train_args": {k: str(v) for k, v in dataclasses.asdict(args).items()},
+        "command": "python -m cfvs_maniskill.train " + " ".join(sys.argv[1:]),
+        "validation": state["history"][-1],
+        "history": state["history"],
+        "wall_time_s": round(state["wall_s"], 1),
+        "torch_threads": torch.get_num_threads(),
+    }
+    save_atomic({**meta, "state_dict": model.state_dict()}, args.out)
+    args.out.with_suffix(".json").write_text(json.dumps(meta, indent=1))
+    resume_path.unlink(missing_ok=True)
+    print(f"wrote {args.out} ({state['wall_s'] / 60:.1f} min)")
+    return state
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = tyro.cli(TrainArgs, args=argv)
+    try:
+        train(args)
+    except DatasetError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

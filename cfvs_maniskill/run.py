@@ -23,8 +23,9 @@ class RunArgs:
 
     task: str = "PegInsert6DoF"
     """Task name or env id (a file in tasks/), e.g. PegInsert3DoF or PegInsert6DoF-v1."""
-    agent: str = "oracle"
-    """Policy to run: oracle (true hole pose; the default until CFVS weights ship)."""
+    agent: str = "cfvs"
+    """Policy: cfvs (shipped weights), cfvs_no_c2f / cfvs_no_map / cfvs_no_aug (the paper's
+    ablations), oracle (reads the true hole pose)."""
     episodes: int = 10
     """Number of episodes."""
     seed: int = 0
@@ -97,7 +98,12 @@ def main(args: RunArgs) -> list:
             max_steps_per_video=None,
         )
     executor = Executor(env)
-    agent = make_agent(args.agent, env)
+    from cfvs_maniskill.nets.checkpoint import WeightsError
+
+    try:
+        agent = make_agent(args.agent, env)
+    except WeightsError as e:
+        _fail(str(e))
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
     results = []

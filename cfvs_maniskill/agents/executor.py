@@ -76,7 +76,11 @@ class Executor:
             action = torch.as_tensor(np.concatenate([q, qd]), dtype=torch.float32)[None]
         else:
             action = torch.as_tensor(q, dtype=torch.float32)[None]
-        self.last_obs, _, _, _, self.last_info = self.gym_env.step(action)
+        self.env.defer_obs = True
+        try:
+            _, _, _, _, self.last_info = self.gym_env.step(action)
+        finally:
+            self.env.defer_obs = False
         self.steps += 1
         if not np.all(np.isfinite(self.env.agent.robot.get_qpos().cpu().numpy())):
             raise FloatingPointError("simulation state became NaN")
@@ -110,6 +114,7 @@ class Executor:
             prev = q
         for _ in range(self.cfg.settle_steps):
             self._step(path[-1])
+        self.last_obs = self.env.get_obs()  # one observation, where the agent looks next
         got = self.env.tcp_matrix()
         err = np.linalg.norm(got[:3, 3] - target[:3, 3])
         err_rot = np.degrees(G.rot_angle(got[:3, :3].T @ target[:3, :3]))

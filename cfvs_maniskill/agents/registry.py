@@ -13,10 +13,29 @@ def _oracle(env) -> Agent:
     return OracleAgent(env)
 
 
-AGENTS: dict[str, Callable[..., Agent]] = {"oracle": _oracle}
+def _cfvs(**switches) -> Callable[..., Agent]:
+    def make(env) -> Agent:
+        from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
+
+        agent = CFVSAgent(env, CFVSConfig(**switches))
+        if switches:
+            agent.name = "cfvs_" + "_".join(f"no_{k}" for k in switches)
+        return agent
+
+    return make
+
+
+AGENTS: dict[str, Callable[..., Agent]] = {
+    "cfvs": _cfvs(),
+    # The paper's ablations (Table IV).
+    "cfvs_no_c2f": _cfvs(coarse_to_fine=False),
+    "cfvs_no_map": _cfvs(confidence_map=False),
+    "cfvs_no_aug": _cfvs(augmentation=False),
+    "oracle": _oracle,
+}
 AGENT_OBS_MODES = {"oracle": "state"}
-DEFAULT_AGENT = "oracle"
-"""Until CFVS weights ship, the run command's default is the oracle."""
+"""Agents not listed here see the wrist point cloud."""
+DEFAULT_AGENT = "cfvs"
 
 
 def make_agent(name: str, env) -> Agent:

@@ -99,6 +99,10 @@ class PegInsertEnv(BaseEnv):
         self.hole_pose = np.eye(4)
         """World pose of the current hole frame (origin: centre of the opening, +z out)."""
         self.object_index = 0
+        self.defer_obs = False
+        """While True, steps return an empty observation and render nothing (the executor
+        sets it during moves: agents only look after a move ends, so rendering every
+        control step would be wasted time)."""
         self.episode_info: dict[str, Any] = {}
         self._noise_gen = torch.Generator().manual_seed(0)
         super().__init__(
@@ -318,6 +322,8 @@ class PegInsertEnv(BaseEnv):
         return extra
 
     def get_obs(self, info: dict | None = None, unflattened: bool = False):
+        if self.defer_obs:
+            return {}
         obs = super().get_obs(info, unflattened)
         std = self.depth_noise_std
         if std > 0 and isinstance(obs, dict):

@@ -1,0 +1,142 @@
+"""The CFVS agent (paper, Fig. 2): OAKN coarse move, OPN fine visual servoing, insertion.
+
+1. Coarse (open loop): OAKN votes the hole's keypoints from the wrist cloud; Algorithm 1
+   turns them into the hole frame; the peg moves to the pre-insertion pose above it.
+2. Fine (closed loop, Algorithm 2): OPN reads the cloud cropped around the end-effector and
+   returns the offset (dt, dr) to the pre-insertion pose; the peg moves by it; repeat until
+   the offset is below (e_t, e_r) or `max_fine_iterations` is reached.
+3. Insert along the tool axis (shared executor, force-bounded).
+
+Ablations of the paper's Table IV are switches: `coarse_to_fine=False` inserts right after
+the coarse move, `confidence_map=False` averages all candidate keypoints uniformly,
+`augmentation=False` loads weights trained without augmentation (`*_noaug.pt`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import yaml
+
+from cfvs_maniskill.agents.base import Action, Agent, Observation
+from cfvs_maniskill.constants import AGENTS_DIR
+from cfvs_maniskill.data import labels as L
+from cfvs_maniskill.data.clouds import (
+    fine_crop,
+    object_points,
+    sample_fixed,
+    tool_to_world,
+)
+from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.nets.checkpoint import load_weights
+from cfvs_maniskill.nets.oakn import weighted_keypoints
+
+WEIGHTS_DIR = AGENTS_DIR / "cfvs"
+
+
+@dataclass
+class CFVSConfig:
+    coarse_to_fine: bool = True
+    """Run the fine OPN loop after the coarse move (ablation: False)."""
+    confidence_map: bool = True
+    """Weight keypoint candidates by OAKN's confidence (ablation: uniform mean)."""
+    augmentation: bool = True
+    """Use weights trained with augmentation (ablation: the *_noaug.pt files)."""
+    max_fine_iterations: int = 8
+    """Algorithm 2's repeat limit."""
+    tol_translation: float = 0.0015
+    """e_t: stop servoing when the predicted |dt| is below this, metres."""
+    tol_rotation_deg: float = 1.5
+    """e_r: ... and the predicted |dr| below this, degrees."""
+    fine_votes: int = 3
+    """OPN predictions (on independent random point subsets) averaged per fine step."""
+    weights_dir: Path = WEIGHTS_DIR
+
+
+def weights_for(task: str, peg: str, weights_dir: Path, augmentation: bool) -> dict[str, Path]:
+    """The OAKN / OPN files for a task: `tasks.yaml` in the weights folder maps task names;
+    tasks it does not list (e.g. new task files) use `<peg>/oakn.pt`, `<peg>/opn.pt`."""
+    table_file = weights_dir / "tasks.yaml"
+    table = yaml.safe_load(table_file.read_text()) if table_file.is_file() else {}
+    entry = (table or {}).get(task) or {n: f"{peg}/{n}.pt" for n in ("oakn", "opn")}
+    out = {}
+    for net in ("oakn", "opn"):
+        p = weights_dir / entry[net]
+        if not augmentation:
+            p = p.with_name(p.stem + "_noaug.pt")
+        out[net] = p
+    return out
+
+
+class CFVSAgent(Agent):
+    name = "cfvs"
+    obs_mode = "pointcloud"
+
+    def __init__(self, env, cfg: CFVSConfig | None = None):
+        self.env = env.unwrapped
+        self.cfg = cfg or CFVSConfig()
+        task = self.env.task
+        self.peg = task.peg
+        files = weights_for(task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation)
+        self.oakn, self.oakn_meta = load_weights(files["oakn"], "oakn", task.peg)
+        self.opn, self.opn_meta = load_weights(files["opn"], "opn", task.peg)
+        self.max_decisions = 2 + self.cfg.max_fine_iterations
+        self.rng = np.random.default_rng(0)
+        self.stage = "coarse"
+        self.fine_steps = 0
+        self.last_estimate: np.ndarray | None = None
+
+    def reset(self, info: dict) -> None:
+        self.stage, self.fine_steps = "coarse", 0
+        self.rng = np.random.default_rng(abs(hash(str(info.get("hole_pose")))) % 2**32)
+
+    # ------------------------------------------------------------------ perception
+    @torch.no_grad()
+    def estimate_hole(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
+        """OAKN + Algorithm 1: the hole's world frame from one wrist cloud, or None."""
+        pts = object_points(xyzw, tcp, self.peg)
+        if len(pts) < 32:
+            return None
+        x = torch.from_numpy(sample_fixed(pts, int(self.oakn_meta["points"]), self.rng))[None]
+        offsets, logits = self.oakn(x)
+        w = torch.sigmoid(logits) if self.cfg.confidence_map else None
+        k, _ = weighted_keypoints(x, offsets, w)
+        k_world = tool_to_world(k[0].numpy().astype(np.float64), tcp)
+        return L.hole_frame_from_keypoints(k_world.astype(np.float64))
+
+    @torch.no_grad()
+    def predict_offset(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
+        """OPN: (dt, dr) in the tool frame to the pre-insertion pose, or None."""
+        pts = fine_crop(object_points(xyzw, tcp, self.peg))
+        if len(pts) < 32:
+            return None
+        n = int(self.opn_meta["points"])
+        batch = np.stack([sample_fixed(pts, n, self.rng) for _ in range(self.cfg.fine_votes)])
+        return self.opn(torch.from_numpy(batch)).mean(dim=0).numpy().astype(np.float64)
+
+    # ------------------------------------------------------------------ decisions
+    def act(self, observation: Observation) -> Action:
+        xyzw = observation.obs["pointcloud"]["xyzw"][0].cpu().numpy()
+        tcp = observation.tcp_pose
+        if self.stage == "coarse":
+            H = self.estimate_hole(xyzw, tcp)
+            if H is None or not np.all(np.isfinite(H)):
+                return Action.give_up("OAKN: the camera sees no hole object")
+            self.last_estimate = H
+            self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
+            return Action.move(self.env.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp))
+        if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
+            a = self.predict_offset(xyzw, tcp)
+            if a is None:
+                return Action.give_up("OPN: nothing seen around the peg")
+            small = np.linalg.norm(a[:3]) < self.cfg.tol_translation and np.degrees(
+                np.linalg.norm(a[3:])
+            ) < self.cfg.tol_rotation_deg
+            if not small:
+                self.fine_steps += 1
+                return Action.move(L.apply_action(tcp, a))
+        return Action.insert()
+

@@ -1,0 +1,171 @@
+"""Datasets (issue 5): labels checked geometrically on real rendered samples, augmentation,
+crash-safe resumable files, the picture."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from cfvs_maniskill import geometry as G
+from cfvs_maniskill.data import labels as L
+from cfvs_maniskill.data.augment import AugmentConfig, augment
+from cfvs_maniskill.data.clouds import tool_to_world
+from cfvs_maniskill.data.collect import CollectArgs, collect
+from cfvs_maniskill.data.procedural import procedural_specs
+from cfvs_maniskill.data.store import DatasetError, load
+from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.objects.library import load_library
+
+from .conftest import ROOT, run_cli
+
+
+@pytest.fixture(scope="module")
+def coarse_file(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("data") / "coarse.h5"
+    collect(CollectArgs(task="PegInsert6DoF", kind="coarse", samples=12, out=out, points=512))
+    return out
+
+
+@pytest.fixture(scope="module")
+def fine_file(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("data") / "fine.h5"
+    collect(CollectArgs(task="PegInsert6DoF", kind="fine", samples=12, out=out, points=512))
+    return out
+
+
+def test_coarse_labels_are_geometrically_right(coarse_file):
+    attrs, d = load(coarse_file)
+    assert attrs["kind"] == "coarse" and d["points"].shape == (12, 512, 3)
+    # Offsets + points give the keypoints exactly.
+    recon = d["points"][:, :, None, :] + d["offsets"]
+    assert np.abs(recon - d["keypoints"][:, None]).max() < 1e-6
+    for i in range(12):
+        tcp, H = d["tcp_pose"][i], d["hole_pose"][i]
+        k = tool_to_world(d["keypoints"][i].astype(np.float64), tcp)
+        # k1 is the hole's centre on its top face; k3 is on the hole axis, out of the hole.
+        assert np.linalg.norm(k[0] - H[:3, 3]) < 1e-5
+        kh = (k - H[:3, 3]) @ H[:3, :3]  # keypoints in the hole frame
+        assert np.allclose(kh[2], [0, 0, L.KEYPOINT_SPACING], atol=1e-5)
+        assert abs(kh[1, 2]) < 1e-5 and abs(np.linalg.norm(kh[1]) - L.KEYPOINT_SPACING) < 1e-5
+        # The top face really is there: object points within 2-4 cm of k1 lie at z ~ 0.
+        p = (tool_to_world(d["points"][i].astype(np.float64), tcp) - H[:3, 3]) @ H[:3, :3]
+        r = np.hypot(p[:, 0], p[:, 1])
+        ring = (r > 0.037) & (r < 0.05)
+        assert ring.sum() > 5 and np.median(np.abs(p[ring, 2])) < 0.003
+        # The highest-confidence points surround the hole: close to its axis, all around.
+        c = d["confidence"][i]
+        top = np.argsort(c)[-40:]
+        assert np.median(r[top]) < 0.045
+        sectors = np.histogram(np.arctan2(p[top, 1], p[top, 0]), bins=4, range=(-np.pi, np.pi))
+        assert (sectors[0] > 0).sum() >= 3, sectors[0]
+        assert np.allclose(
+            c, np.exp(-np.sum(p**2, axis=1) / (2 * L.CONFIDENCE_SIGMA**2)), atol=1e-4
+        )
+
+
+def test_fine_actions_undo_the_perturbation(fine_file, make_env):
+    attrs, d = load(fine_file)
+    assert attrs["kind"] == "fine" and d["action"].shape == (12, 6)
+    env = make_env("PegInsert6DoF-v1", obs_mode="state", objects=("train",))
+    u = env.unwrapped
+    moved = 0
+    for i in range(12):
+        tcp, H, a = d["tcp_pose"][i], d["hole_pose"][i], d["action"][i].astype(np.float64)
+        assert np.linalg.norm(a[:3]) <= 0.0301 and np.degrees(np.linalg.norm(a[3:])) < 19
+        T = L.apply_action(tcp, a)
+        # Applying the action reaches the true pre-insertion pose above the hole ...
+        tip = G.inv(H) @ T
+        assert np.allclose(tip[:3, 3], [0, 0, PRE_INSERT_HEIGHT], atol=1e-4)
+        assert np.degrees(np.arccos(np.clip(-tip[2, 2], -1, 1))) < 0.05
+        # ... and the robot really gets there.
+        q, ok = u.ik(T, u.agent.robot.get_qpos()[0].numpy())
+        if ok:
+            u.agent.reset(torch.as_tensor(q, dtype=torch.float32)[None])
+            assert np.linalg.norm(u.tcp_matrix()[:3, 3] - T[:3, 3]) < 1e-3
+            moved += 1
+    assert moved >= 10
+
+
+def test_augmentation_keeps_the_hole_and_changes_the_body(coarse_file):
+    _, d = load(coarse_file, ("points", "keypoints"))
+    p, k = d["points"][0], d["keypoints"][0]
+    H = L.hole_frame_from_keypoints(k.astype(np.float64))
+    u = (p - H[:3, 3]) @ H[:3, :3]
+    near = np.hypot(u[:, 0], u[:, 1]) < AugmentConfig().keep_radius
+    rng = np.random.default_rng(0)
+    kinds = set()
+    for _ in range(40):
+        q, kind = augment(p, k, rng, AugmentConfig())
+        kinds.add(kind)
+        assert q.shape == p.shape and np.isfinite(q).all()
+        assert np.abs(q[near] - p[near]).max() < 1e-5  # the hole region is untouched
+        if kind != "none":
+            assert np.abs(q[~near] - p[~near]).max() > 1e-3
+    assert kinds == {"none", "scale", "rotate", "mix"}
+
+
+def test_procedural_bodies_are_valid_training_objects(tmp_path, monkeypatch):
+    monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
+    folder, names = procedural_specs(8, seed=3, peg="square", clearance=0.004, depth=0.045)
+    lib = load_library([folder])
+    assert not lib.errors
+    specs = [lib.specs[n] for n in names]
+    assert all(s.split == "train" for s in specs)
+    assert len({(s.body_kind, str(s.body)) for s in specs}) == 8
+    assert {s.name for s in lib.select(["test"])}.isdisjoint(names)
+
+
+@pytest.mark.slow
+def test_resume_after_kill_gives_exactly_n_unique_samples(tmp_path):
+    """SIGKILL a collection after its first chunk, run it again: N samples, each once,
+    identical to an uninterrupted collection."""
+    args = ["--task", "PegInsert3DoF", "--kind", "coarse", "--samples", "100", "--points", "256"]
+    out = tmp_path / "killed.h5"
+    cmd = [sys.executable, "-m", "cfvs_maniskill.data", "collect", *args, "--out", str(out)]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    parts = Path(str(out) + ".parts")
+    deadline = time.time() + 300
+    while not list(parts.glob("part-*.npz")) and time.time() < deadline:
+        time.sleep(0.2)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert list(parts.glob("part-*.npz")), "no chunk was written before the kill"
+    assert not out.exists()
+    r = run_cli("cfvs_maniskill.data", "collect", *args, "--out", str(out))
+    assert r.returncode == 0, r.stderr[-2000:]
+    ref = tmp_path / "ref.h5"
+    r = run_cli("cfvs_maniskill.data", "collect", *args, "--out", str(ref))
+    assert r.returncode == 0, r.stderr[-2000:]
+    with h5py.File(out) as a, h5py.File(ref) as b:
+        assert np.array_equal(a["sample_index"][:], np.arange(100))
+        pa = a["points"][:]
+        assert len(np.unique(pa.reshape(100, -1), axis=0)) == 100
+        assert np.array_equal(pa, b["points"][:])
+        assert list(a["object"].asstr()[:]) == list(b["object"].asstr()[:])
+    assert not parts.exists()
+
+
+def test_mismatched_resume_names_the_field(coarse_file):
+    with pytest.raises(DatasetError, match="field 'kind'"):
+        collect(CollectArgs(task="PegInsert6DoF", kind="fine", samples=20, out=coarse_file))
+    with pytest.raises(DatasetError, match="field 'num_points'"):
+        collect(CollectArgs(task="PegInsert6DoF", kind="coarse", samples=20, out=coarse_file))
+
+
+def test_show_draws_a_png(coarse_file, fine_file, tmp_path):
+    from cfvs_maniskill.data.show import show
+
+    for f in (coarse_file, fine_file):
+        png = show(f, 1, tmp_path / f"{f.stem}.png")
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+    r = run_cli("cfvs_maniskill.data", "show", str(coarse_file), "--index", "99")
+    assert r.returncode == 2 and "--index" in r.stderr and "12 samples" in r.stderr

@@ -132,11 +132,11 @@ class CFVSAgent(Agent):
             a = self.predict_offset(xyzw, tcp)
             if a is None:
                 return Action.give_up("OPN: nothing seen around the peg")
-            small = np.linalg.norm(a[:3]) < self.cfg.tol_translation and np.degrees(
-                np.linalg.norm(a[3:])
-            ) < self.cfg.tol_rotation_deg
+            small = (
+                np.linalg.norm(a[:3]) < self.cfg.tol_translation
+                and np.degrees(np.linalg.norm(a[3:])) < self.cfg.tol_rotation_deg
+            )
             if not small:
                 self.fine_steps += 1
                 return Action.move(L.apply_action(tcp, a))
         return Action.insert()
-

@@ -16,6 +16,8 @@ def test_run_writes_json_lines_and_a_summary(tmp_path):
         "cfvs_maniskill.run",
         "--task",
         "PegInsert3DoF",
+        "--agent",
+        "oracle",
         "--episodes",
         "2",
         "--seed",

@@ -1,0 +1,103 @@
+"""The CFVS agent and its shipped weights (issue 6)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, weights_for
+from cfvs_maniskill.agents.executor import Executor
+from cfvs_maniskill.data.clouds import fine_crop, object_points, sample_fixed
+from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
+from cfvs_maniskill.nets.oakn import weighted_keypoints
+
+REFERENCE = Path(__file__).parent / "data" / "cfvs_reference.npz"
+"""A real 6-DoF wrist cloud and the shipped networks' outputs on it. Regenerate after
+retraining with CFVS_UPDATE_REFERENCE=1 pytest tests/test_cfvs.py."""
+
+
+def _reference_outputs(coarse: np.ndarray, fine: np.ndarray) -> dict[str, np.ndarray]:
+    files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=True)
+    oakn, _ = load_weights(files["oakn"], "oakn", "square")
+    opn, _ = load_weights(files["opn"], "opn", "square")
+    with torch.no_grad():
+        x = torch.from_numpy(coarse)[None]
+        off, logit = oakn(x)
+        k, _ = weighted_keypoints(x, off, torch.sigmoid(logit))
+        a = opn(torch.from_numpy(fine)[None])
+    return {"keypoints": k[0].numpy(), "action": a[0].numpy()}
+
+
+def test_shipped_weights_give_pinned_outputs(make_env):
+    if os.environ.get("CFVS_UPDATE_REFERENCE") == "1" or not REFERENCE.exists():
+        env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
+        obs, _ = env.reset(seed=11)
+        u = env.unwrapped
+        tcp = u.tcp_matrix()
+        rng = np.random.default_rng(0)
+        coarse = sample_fixed(
+            object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, "square"), 512, rng
+        )
+        q, ok = u.ik(u.insertion_pose(-0.04), u.agent.robot.get_qpos()[0].numpy())
+        assert ok
+        u.agent.reset(torch.as_tensor(q, dtype=torch.float32)[None])
+        obs = u.get_obs()
+        tcp = u.tcp_matrix()
+        fine = sample_fixed(
+            fine_crop(object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, "square")), 1024, rng
+        )
+        np.savez(REFERENCE, coarse=coarse, fine=fine, **_reference_outputs(coarse, fine))
+    ref = np.load(REFERENCE)
+    got = _reference_outputs(ref["coarse"], ref["fine"])
+    assert np.allclose(got["keypoints"], ref["keypoints"], atol=1e-5)
+    assert np.allclose(got["action"], ref["action"], atol=1e-5)
+    # And the outputs are sensible: the fine cloud was taken 1 cm above the pre-insertion
+    # pose, so OPN must ask to move about 1 cm forward along the tool axis.
+    assert 0.004 < got["action"][2] < 0.016, got["action"]
+
+
+def test_bad_weights_files_are_named(tmp_path):
+    files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=True)
+    with pytest.raises(WeightsError, match="not found"):
+        load_weights(tmp_path / "nope.pt", "oakn")
+    torn = tmp_path / "torn.pt"
+    torn.write_bytes(files["oakn"].read_bytes()[:5000])
+    with pytest.raises(WeightsError, match="torn.pt: not a readable weights file"):
+        load_weights(torn, "oakn")
+    with pytest.raises(WeightsError, match=r"holds a opn network .*expected oakn"):
+        load_weights(files["opn"], "oakn")
+    with pytest.raises(WeightsError, match="trained for a square peg"):
+        load_weights(files["oakn"], "oakn", "round")
+    other = tmp_path / "other.pt"
+    shutil.copy(files["oakn"], other)
+    blob = torch.load(other, weights_only=False)
+    blob["state_dict"] = {k: v[..., :1] for k, v in blob["state_dict"].items()}
+    torch.save(blob, other)
+    with pytest.raises(WeightsError, match="do not fit the oakn architecture"):
+        load_weights(other, "oakn")
+
+
+def test_missing_weights_name_the_file(make_env, tmp_path):
+    from cfvs_maniskill.agents.cfvs import CFVSConfig
+
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
+    with pytest.raises(WeightsError, match=r"square/oakn.pt: weights file not found"):
+        CFVSAgent(env, CFVSConfig(weights_dir=tmp_path))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ["PegInsert3DoF-v1", "PegInsert6DoF-v1"])
+def test_cfvs_inserts_on_unseen_objects(make_env, env_id):
+    env = make_env(env_id, obs_mode="pointcloud", objects=("test",))
+    agent = CFVSAgent(env)
+    ex = Executor(env)
+    results = [run_episode(env, agent, ex, seed=s) for s in range(500, 508)]
+    ok = sum(r.success for r in results)
+    assert ok >= 6, [(r.object, r.reason) for r in results]
+    assert all(r.reason or r.success for r in results)

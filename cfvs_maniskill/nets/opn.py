@@ -14,7 +14,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from cfvs_maniskill.nets.pointnet2 import GlobalAbstraction, SetAbstraction, mlp
+from cfvs_maniskill.nets.pointnet2 import EncoderConfig, encoder, mlp
 
 POINT_SCALE = 10.0
 """Coordinates enter in decimetres."""
@@ -25,33 +25,18 @@ DR_UNIT = 0.1
 
 
 @dataclass(frozen=True)
-class OPNConfig:
-    sa1_centres: int = 256
+class OPNConfig(EncoderConfig):
     sa1_radii: tuple[float, ...] = (0.015,)
-    """Ball radii of the first set abstraction, metres (several = MSG)."""
-    sa1_k: tuple[int, ...] = (16,)
-    sa2_centres: int = 64
+    """The fine crop is 16 cm across: smaller balls than OAKN's."""
     sa2_radius: float = 0.04
-    sa2_k: int = 16
-    width: int = 64
 
 
 class OPN(nn.Module):
     def __init__(self, cfg: OPNConfig = OPNConfig()):
         super().__init__()
         self.cfg = cfg
-        w, s = cfg.width, POINT_SCALE
-        self.sa1 = SetAbstraction(
-            cfg.sa1_centres,
-            [r * s for r in cfg.sa1_radii],
-            cfg.sa1_k,
-            0,
-            [[w // 2, w // 2, w]] * len(cfg.sa1_radii),
-        )
-        self.sa2 = SetAbstraction(
-            cfg.sa2_centres, [cfg.sa2_radius * s], [cfg.sa2_k], self.sa1.out_ch, [[w, w, 2 * w]]
-        )
-        self.glob = GlobalAbstraction(self.sa2.out_ch, [2 * w, 4 * w])
+        w = cfg.width
+        self.sa1, self.sa2, self.glob = encoder(cfg, POINT_SCALE)
         self.head = nn.Sequential(mlp([4 * w, 2 * w, w]), nn.Linear(w, 6))
 
     def forward(self, points: Tensor) -> Tensor:

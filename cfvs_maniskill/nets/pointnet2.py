@@ -12,6 +12,7 @@ is the bottleneck at batch size 1. Sampling indices carry no gradient, as in the
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import fpsample
 import numpy as np
@@ -134,3 +135,36 @@ class FeaturePropagation(nn.Module):
             up = (gather(sparse, idx) * w.unsqueeze(-1)).sum(dim=2)
         x = up if skip is None else torch.cat([up, skip], dim=-1)
         return self.net(x)
+
+
+@dataclass(frozen=True)
+class EncoderConfig:
+    """Two set abstractions and a global one: the encoder both CFVS networks share."""
+
+    sa1_centres: int = 256
+    sa1_radii: tuple[float, ...] = (0.03,)
+    """Ball radii of the first set abstraction, metres (several = MSG)."""
+    sa1_k: tuple[int, ...] = (16,)
+    sa2_centres: int = 64
+    sa2_radius: float = 0.08
+    sa2_k: int = 16
+    width: int = 64
+    """Base channel width; layers use 1-4x this."""
+
+
+def encoder(
+    cfg: EncoderConfig, scale: float
+) -> tuple[SetAbstraction, SetAbstraction, GlobalAbstraction]:
+    """SA1 -> SA2 -> global, for inputs multiplied by `scale` (radii are given in metres)."""
+    w = cfg.width
+    sa1 = SetAbstraction(
+        cfg.sa1_centres,
+        [r * scale for r in cfg.sa1_radii],
+        cfg.sa1_k,
+        0,
+        [[w // 2, w // 2, w]] * len(cfg.sa1_radii),
+    )
+    sa2 = SetAbstraction(
+        cfg.sa2_centres, [cfg.sa2_radius * scale], [cfg.sa2_k], sa1.out_ch, [[w, w, 2 * w]]
+    )
+    return sa1, sa2, GlobalAbstraction(sa2.out_ch, [2 * w, 4 * w])

@@ -131,7 +131,12 @@ class Collector:
         obj = names[int(rng.integers(len(names)))]
         lo, hi = min(task.init_error.values()), max(task.init_error.values())
         u.init_error_m = float(rng.uniform(lo, hi))
-        obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)), options={"object": obj})
+        # The fine kind looks only after moving the peg: skip rendering the start view.
+        u.defer_obs = args.kind == "fine"
+        try:
+            obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)), options={"object": obj})
+        finally:
+            u.defer_obs = False
         H = u.hole_pose.copy()
         if args.kind == "coarse":
             return self._coarse(u, obs, H, rng, i)

@@ -35,7 +35,8 @@ class TrainArgs:
     """Train a CFVS network (OAKN on a coarse dataset, OPN on a fine one) on the CPU."""
 
     net: str = "oakn"
-    """oakn (coarse keypoints) or opn (fine offsets)."""
+    """oakn (coarse keypoints), opnv (fine stage by keypoint voting, shipped) or opn (the
+    paper's fine stage: global feature -> offsets)."""
     data: Path = Path("data/coarse.h5")
     """Dataset file from `python -m cfvs_maniskill.data collect`."""
     out: Path = Path("agents/cfvs/oakn.pt")
@@ -58,8 +59,14 @@ class TrainArgs:
     """Stop (resumably) after this much wall time; 0 = no limit."""
 
 
+VOTING = ("oakn", "opnv")
+"""Nets that vote keypoints per point (trained with the OAKN loss)."""
+OPNV_CONFIG = OAKNConfig(sa1_radii=(0.015,), sa2_radius=0.04)
+"""The fine crop is 16 cm across: smaller balls than OAKN's 3 / 8 cm."""
+
+
 def _points_default(args: TrainArgs) -> int:
-    return args.points or (512 if args.net == "oakn" else 1024)
+    return args.points or (1024 if args.net == "opn" else 512)
 
 
 class Batches:
@@ -72,17 +79,17 @@ class Batches:
 
     def make(self, idx: np.ndarray, rng: np.random.Generator) -> dict[str, torch.Tensor]:
         pts = []
-        keys = self.d["keypoints"][idx] if self.net == "oakn" else None
+        keys = self.d["keypoints"][idx] if self.net in VOTING else None
         for j, i in enumerate(idx):
             p = self.d["points"][i]
             sel = rng.choice(len(p), self.n, replace=len(p) < self.n)
             p = p[sel]
             if self.aug is not None:
-                k = keys[j] if keys is not None else _keypoints_from_action(self.d["action"][i])
+                k = keys[j] if keys is not None else L.fine_keypoints(self.d["action"][i])
                 p, _ = augment(p, k, rng, self.aug)
             pts.append(p)
         out = {"points": torch.from_numpy(np.stack(pts).astype(np.float32))}
-        if self.net == "oakn":
+        if self.net in VOTING:
             k = torch.from_numpy(keys.astype(np.float32))
             x = out["points"]
             out["keypoints"] = k
@@ -91,17 +98,6 @@ class Batches:
         else:
             out["action"] = torch.from_numpy(self.d["action"][idx].astype(np.float32))
         return out
-
-
-def _keypoints_from_action(action: np.ndarray) -> np.ndarray:
-    """Fine samples: the hole frame in the tool frame, from the action to the pre-insertion
-    pose (the hole's centre is PRE_INSERT_HEIGHT ahead of that tool, x along tool x)."""
-    from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
-
-    T = L.apply_action(np.eye(4), action)
-    c = T[:3, 3] + PRE_INSERT_HEIGHT * T[:3, 2]
-    s = L.KEYPOINT_SPACING
-    return np.stack([c, c + s * T[:3, 0], c - s * T[:3, 2]])
 
 
 def _angle_deg(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -116,15 +112,28 @@ def validate(model, batches: Batches, idx: np.ndarray, net: str) -> dict[str, fl
     errs: dict[str, list[np.ndarray]] = {}
     for a in range(0, len(idx), 32):
         b = batches.make(idx[a : a + 32], rng)
-        if net == "oakn":
+        if net in VOTING:
             off, logit = model(b["points"])
             k, _ = weighted_keypoints(b["points"], off, torch.sigmoid(logit))
             gt = b["keypoints"]
+            if net == "opnv":  # the offsets the agent would command, vs the labels
+                acts = [L.fine_action_from_keypoints(x.numpy()) for x in k]
+                pred = torch.from_numpy(np.stack(acts).astype(np.float32))
+                want = torch.from_numpy(
+                    np.stack([L.fine_action_from_keypoints(x.numpy()) for x in gt])
+                )
+                e_act = {
+                    "dt_mm": 1000 * (pred[:, :3] - want[:, :3]).norm(dim=-1),
+                    "dr_deg": torch.rad2deg((pred[:, 3:] - want[:, 3:]).norm(dim=-1)),
+                    "dt_zero_mm": 1000 * want[:, :3].norm(dim=-1),
+                }
             e = {
                 "k1_mm": 1000 * (k[:, 0] - gt[:, 0]).norm(dim=-1),
                 "axis_deg": _angle_deg(k[:, 2] - k[:, 0], gt[:, 2] - gt[:, 0]),
                 "xdir_deg": _angle_deg(k[:, 1] - k[:, 0], gt[:, 1] - gt[:, 0]),
             }
+            if net == "opnv":
+                e.update(e_act)
         else:
             pred, gt = model(b["points"]), b["action"]
             e = {
@@ -144,13 +153,18 @@ def validate(model, batches: Batches, idx: np.ndarray, net: str) -> dict[str, fl
 
 
 def train(args: TrainArgs) -> dict:
-    if args.net not in ("oakn", "opn"):
-        raise DatasetError(f"--net: expected oakn or opn, got {args.net!r}")
+    if args.net not in ("oakn", "opnv", "opn"):
+        raise DatasetError(f"--net: expected oakn, opnv or opn, got {args.net!r}")
     if args.threads:
         torch.set_num_threads(args.threads)
     kind = "coarse" if args.net == "oakn" else "fine"
     fields = ("points", "keypoints") if args.net == "oakn" else ("points", "action")
     attrs, data = load(args.data, fields)
+    if args.net == "opnv":
+        # Keypoints of the pre-insertion target, k2 encoded for the square's symmetry.
+        data["keypoints"] = np.stack(
+            [L.encode_symmetric_x(L.fine_keypoints(a)) for a in data["action"]]
+        )
     if attrs.get("kind") != kind:
         raise DatasetError(
             f"{args.data}: field 'kind': {args.net} trains on a {kind} dataset, "
@@ -161,7 +175,7 @@ def train(args: TrainArgs) -> dict:
     n_val = max(1, int(m * args.val_fraction))
     train_idx, val_idx = np.arange(m - n_val), np.arange(m - n_val, m)
     n_points = _points_default(args)
-    net_cfg = OAKNConfig() if args.net == "oakn" else OPNConfig()
+    net_cfg = {"oakn": OAKNConfig(), "opnv": OPNV_CONFIG, "opn": OPNConfig()}[args.net]
     batches = Batches(
         data,
         args.net,
@@ -207,7 +221,7 @@ def train(args: TrainArgs) -> dict:
         )
         for s in bar:
             b = batches.make(order[s * args.batch : (s + 1) * args.batch], rng)
-            if args.net == "oakn":
+            if args.net in VOTING:
                 off, logit = model(b["points"])
                 loss, parts = oakn_loss(off, logit, b["offsets"], b["confidence"])
             else:

@@ -101,3 +101,18 @@ def test_cfvs_inserts_on_unseen_objects(make_env, env_id):
     ok = sum(r.success for r in results)
     assert ok >= 6, [(r.object, r.reason) for r in results]
     assert all(r.reason or r.success for r in results)
+
+
+def test_agent_gives_up_with_a_reason_when_it_sees_nothing(make_env):
+    from cfvs_maniskill.agents.base import Observation
+
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
+    env.reset(seed=3)
+    agent = CFVSAgent(env)
+    agent.reset({})
+    empty = {"pointcloud": {"xyzw": torch.zeros(1, 64, 4)}}
+    a = agent.act(Observation(empty, env.unwrapped.tcp_matrix()))
+    assert a.kind == "give_up" and "sees no hole object" in a.reason
+    agent.stage = "fine"
+    a = agent.act(Observation(empty, env.unwrapped.tcp_matrix()))
+    assert a.kind == "give_up" and "OPN" in a.reason

@@ -82,7 +82,7 @@ class CFVSAgent(Agent):
         self.peg = task.peg
         files = weights_for(task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation)
         self.oakn, self.oakn_meta = load_weights(files["oakn"], "oakn", task.peg)
-        self.opn, self.opn_meta = load_weights(files["opn"], "opn", task.peg)
+        self.opn, self.opn_meta = load_weights(files["opn"], ("opnv", "opn"), task.peg)
         self.max_decisions = 2 + self.cfg.max_fine_iterations
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
@@ -114,8 +114,16 @@ class CFVSAgent(Agent):
         if len(pts) < 32:
             return None
         n = int(self.opn_meta["points"])
-        batch = np.stack([sample_fixed(pts, n, self.rng) for _ in range(self.cfg.fine_votes)])
-        return self.opn(torch.from_numpy(batch)).mean(dim=0).numpy().astype(np.float64)
+        x = torch.from_numpy(
+            np.stack([sample_fixed(pts, n, self.rng) for _ in range(self.cfg.fine_votes)])
+        )
+        if self.opn_meta["net"] == "opn":  # the paper's OPN: offsets straight from the net
+            return self.opn(x).mean(dim=0).numpy().astype(np.float64)
+        # opnv: vote the target keypoints, then turn them into the offset.
+        offsets, logits = self.opn(x)
+        k, _ = weighted_keypoints(x, offsets, torch.sigmoid(logits))
+        acts = [L.fine_action_from_keypoints(ki.numpy()) for ki in k]
+        return np.mean(acts, axis=0).astype(np.float64)
 
     # ------------------------------------------------------------------ decisions
     def act(self, observation: Observation) -> Action:

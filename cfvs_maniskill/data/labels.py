@@ -95,3 +95,61 @@ def random_offset(
     yaw = np.radians(rng.uniform(-max_yaw_deg, max_yaw_deg))
     R = Rotation.from_rotvec(tilt).as_matrix() @ Rotation.from_rotvec([0, 0, yaw]).as_matrix()
     return G.make(R, t)
+
+
+def encode_symmetric_x(k: np.ndarray, symmetry: int = 4) -> np.ndarray:
+    """Keypoints (3, 3) in the tool frame with k2 re-encoded so that it is continuous in
+    the hole's yaw despite the hole's symmetry (`symmetry`-fold; 4 for a square).
+
+    With u the tool's x projected on the hole's plane and theta the angle from u to the
+    hole's canonical x (|theta| <= 45 deg), k2 = k1 + s (cos(4 theta) u + sin(4 theta) z x u):
+    a square turned by 90 deg gets the same label, so nothing jumps at theta = +-45 deg. A
+    round hole has theta = 0, so k2 is simply along u.
+    """
+    k1, k2, k3 = (np.asarray(v, np.float64) for v in k)
+    z = (k3 - k1) / np.linalg.norm(k3 - k1)
+    u = _projected_tool_x(z)
+    x = k2 - k1
+    theta = np.arctan2(x @ np.cross(z, u), x @ u)
+    phi = symmetry * theta
+    v = np.cos(phi) * u + np.sin(phi) * np.cross(z, u)
+    return np.stack([k1, k1 + KEYPOINT_SPACING * v, k3]).astype(np.float32)
+
+
+def decode_symmetric_x(k: np.ndarray, symmetry: int = 4) -> np.ndarray:
+    """Inverse of `encode_symmetric_x`: the 4x4 hole frame (tool frame) from keypoints."""
+    k1, k2, k3 = (np.asarray(v, np.float64) for v in k)
+    z = (k3 - k1) / np.linalg.norm(k3 - k1)
+    u = _projected_tool_x(z)
+    v = k2 - k1
+    theta = np.arctan2(v @ np.cross(z, u), v @ u) / symmetry
+    x = np.cos(theta) * u + np.sin(theta) * np.cross(z, u)
+    return G.make(np.stack([x, np.cross(z, x), z], axis=1), k1)
+
+
+def _projected_tool_x(z: np.ndarray) -> np.ndarray:
+    u = np.array([1.0, 0.0, 0.0]) - z[0] * z
+    return u / np.linalg.norm(u)
+
+
+def fine_keypoints(action: np.ndarray) -> np.ndarray:
+    """A fine sample's keypoints (tool frame) from its action: the target pre-insertion
+    tool frame is PRE_INSERT_HEIGHT above the hole's centre, its z into the hole, its x the
+    hole's canonical x."""
+    from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+
+    T = apply_action(np.eye(4), np.asarray(action, np.float64))
+    c = T[:3, 3] + PRE_INSERT_HEIGHT * T[:3, 2]
+    s = KEYPOINT_SPACING
+    return np.stack([c, c + s * T[:3, 0], c - s * T[:3, 2]])
+
+
+def fine_action_from_keypoints(k: np.ndarray) -> np.ndarray:
+    """Voted fine keypoints (tool frame, k2 symmetry-encoded) -> the offset (dt, dr) to the
+    pre-insertion pose above the hole, facing into it. Inverse of `fine_keypoints` +
+    `encode_symmetric_x`."""
+    from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+
+    H = decode_symmetric_x(k)
+    R = H[:3, :3] @ np.diag([1.0, -1.0, -1.0])  # tool z into the hole, tool x = hole x
+    return fine_action(np.eye(4), G.make(R, H[:3, 3] + PRE_INSERT_HEIGHT * H[:3, 2]))

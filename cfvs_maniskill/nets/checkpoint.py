@@ -19,7 +19,9 @@ import torch
 from cfvs_maniskill.nets.oakn import OAKN, OAKNConfig
 from cfvs_maniskill.nets.opn import OPN, OPNConfig
 
-NETS = {"oakn": (OAKN, OAKNConfig), "opn": (OPN, OPNConfig)}
+NETS = {"oakn": (OAKN, OAKNConfig), "opn": (OPN, OPNConfig), "opnv": (OAKN, OAKNConfig)}
+"""opnv: the fine stage as dense keypoint voting (OAKN's architecture on the fine crop);
+see `train.py` for why it replaced the global-regression OPN in the shipped agent."""
 WEIGHTS_FORMAT = "cfvs_maniskill.weights/1"
 
 
@@ -50,8 +52,11 @@ def save_atomic(obj: dict, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def load_weights(path: Path | str, net: str, peg: str | None = None):
-    """(model in eval mode, metadata) from a weights file, checked against what we need."""
+def load_weights(path: Path | str, net: str | tuple[str, ...], peg: str | None = None):
+    """(model in eval mode, metadata) from a weights file, checked against what we need
+    (`net`: the network kind, or a tuple of acceptable kinds)."""
+    kinds = (net,) if isinstance(net, str) else tuple(net)
+    net = " or ".join(kinds)
     path = Path(path)
     if not path.is_file():
         raise WeightsError(f"{path}: weights file not found (expected a trained {net} file)")
@@ -61,7 +66,7 @@ def load_weights(path: Path | str, net: str, peg: str | None = None):
         raise WeightsError(f"{path}: not a readable weights file ({type(e).__name__}: {e})") from e
     if not isinstance(blob, dict) or blob.get("format") != WEIGHTS_FORMAT:
         raise WeightsError(f"{path}: not a cfvs_maniskill weights file (format {WEIGHTS_FORMAT})")
-    if blob.get("net") != net:
+    if blob.get("net") not in kinds:
         raise WeightsError(
             f"{path}: holds a {blob.get('net')} network (task {blob.get('task')}), expected {net}"
         )
@@ -70,7 +75,7 @@ def load_weights(path: Path | str, net: str, peg: str | None = None):
             f"{path}: trained for a {blob.get('peg')} peg (task {blob.get('task')}), "
             f"this task uses a {peg} peg"
         )
-    model = build(net, blob["config"])
+    model = build(blob["net"], blob["config"])
     try:
         model.load_state_dict(blob["state_dict"])
     except RuntimeError as e:

@@ -12,6 +12,7 @@ import torch
 
 from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, weights_for
 from cfvs_maniskill.agents.executor import Executor
+from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data.clouds import fine_crop, object_points, sample_fixed
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
@@ -25,13 +26,19 @@ retraining with CFVS_UPDATE_REFERENCE=1 pytest tests/test_cfvs.py."""
 def _reference_outputs(coarse: np.ndarray, fine: np.ndarray) -> dict[str, np.ndarray]:
     files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=True)
     oakn, _ = load_weights(files["oakn"], "oakn", "square")
-    opn, _ = load_weights(files["opn"], "opn", "square")
+    opn, meta = load_weights(files["opn"], ("opnv", "opn"), "square")
     with torch.no_grad():
         x = torch.from_numpy(coarse)[None]
         off, logit = oakn(x)
         k, _ = weighted_keypoints(x, off, torch.sigmoid(logit))
-        a = opn(torch.from_numpy(fine)[None])
-    return {"keypoints": k[0].numpy(), "action": a[0].numpy()}
+        y = torch.from_numpy(fine)[None]
+        if meta["net"] == "opn":
+            a = opn(y)[0].numpy()
+        else:
+            off, logit = opn(y)
+            kf, _ = weighted_keypoints(y, off, torch.sigmoid(logit))
+            a = L.fine_action_from_keypoints(kf[0].numpy())
+    return {"keypoints": k[0].numpy(), "action": a}
 
 
 def test_shipped_weights_give_pinned_outputs(make_env):
@@ -70,7 +77,7 @@ def test_bad_weights_files_are_named(tmp_path):
     torn.write_bytes(files["oakn"].read_bytes()[:5000])
     with pytest.raises(WeightsError, match="torn.pt: not a readable weights file"):
         load_weights(torn, "oakn")
-    with pytest.raises(WeightsError, match=r"holds a opn network .*expected oakn"):
+    with pytest.raises(WeightsError, match=r"holds a opnv? network .*expected oakn"):
         load_weights(files["opn"], "oakn")
     with pytest.raises(WeightsError, match="trained for a square peg"):
         load_weights(files["oakn"], "oakn", "round")

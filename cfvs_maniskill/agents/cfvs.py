@@ -21,6 +21,7 @@ import numpy as np
 import torch
 import yaml
 
+from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.data import labels as L
@@ -125,6 +126,17 @@ class CFVSAgent(Agent):
         acts = [L.fine_action_from_keypoints(ki.numpy()) for ki in k]
         return np.mean(acts, axis=0).astype(np.float64)
 
+    def constrain(self, T: np.ndarray) -> np.ndarray:
+        """Keep only the task's degrees of freedom: 3 / 4-DoF holes are upright, so the peg
+        points straight down (4-DoF keeps the estimated yaw, 3-DoF the current one)."""
+        if self.env.task.dof == 6:
+            return T
+        down = np.array([0.0, 0.0, -1.0])
+        x = T[:3, 0] if self.env.task.dof == 4 else self.env.tcp_matrix()[:3, 0]
+        out = T.copy()
+        out[:3, :3] = G.frame_with_z(down, x)
+        return out
+
     # ------------------------------------------------------------------ decisions
     def act(self, observation: Observation) -> Action:
         xyzw = observation.obs["pointcloud"]["xyzw"][0].cpu().numpy()
@@ -135,11 +147,13 @@ class CFVSAgent(Agent):
                 return Action.give_up("OAKN: the camera sees no hole object")
             self.last_estimate = H
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
-            return Action.move(self.env.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp))
+            return Action.move(self.constrain(self.env.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp)))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
             a = self.predict_offset(xyzw, tcp)
             if a is None:
                 return Action.give_up("OPN: nothing seen around the peg")
+            if self.env.task.dof != 6:  # measure the remaining offset in the allowed DoF only
+                a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a)))
             small = (
                 np.linalg.norm(a[:3]) < self.cfg.tol_translation
                 and np.degrees(np.linalg.norm(a[3:])) < self.cfg.tol_rotation_deg

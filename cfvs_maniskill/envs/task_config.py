@@ -24,6 +24,9 @@ class TaskConfig:
     """Task name; the env id is `<name>-v1`."""
     peg: str = "square"
     """Peg profile: round | square."""
+    dof: int = 6
+    """Degrees of freedom the task asks to control (paper: 3 = x y z, 4 = + yaw about the
+    vertical, 6 = full pose). 3 / 4-DoF holes are upright, so agents keep the peg vertical."""
     clearance: float = DEFAULT_CLEARANCE
     """Hole minus peg width (diametral), metres."""
     hole_depth: float = DEFAULT_HOLE_DEPTH
@@ -91,6 +94,8 @@ def load_task(path: Path) -> TaskConfig:
             v = {str(a): float(b) for a, b in v.items()}
         kwargs[k] = v
     cfg = TaskConfig(**kwargs)
+    if cfg.dof not in (3, 4, 6):
+        raise TaskConfigError(path, "dof", f"expected 3, 4 or 6, got {cfg.dof!r}")
     if cfg.peg not in PEG_PROFILES:
         raise TaskConfigError(path, "peg", f"expected one of {PEG_PROFILES}, got {cfg.peg!r}")
     if not (0 < cfg.clearance < 0.02):

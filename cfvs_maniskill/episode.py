@@ -64,7 +64,7 @@ def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict 
                 break
             if action.kind == "insert":
                 depth = u.task.hole_depth + PRE_INSERT_HEIGHT + INSERT_OVERSHOOT
-                res = executor.insert(depth)
+                res = executor.insert(depth, entry=PRE_INSERT_HEIGHT)
                 inserted = res.ok
                 reason = res.reason
                 break

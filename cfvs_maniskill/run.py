@@ -40,6 +40,9 @@ class RunArgs:
     """Append one JSON line per episode to this file."""
     video: Path | None = None
     """Write one mp4 per episode into this directory."""
+    search_radius: float = 0.0
+    """Compliant spiral search on the rim up to this radius, metres (0: off, the paper's
+    plain insertion; e.g. 0.008). Beyond the paper; applies to every agent."""
 
 
 def _fail(message: str) -> None:
@@ -61,7 +64,7 @@ def main(args: RunArgs) -> list:
     import gymnasium as gym
     from tqdm import tqdm
 
-    from cfvs_maniskill.agents.executor import Executor
+    from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
     from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, AGENTS, make_agent
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.objects.library import SelectionError
@@ -97,7 +100,7 @@ def main(args: RunArgs) -> list:
             video_fps=20,
             max_steps_per_video=None,
         )
-    executor = Executor(env)
+    executor = Executor(env, ExecutorConfig(search_radius=args.search_radius))
     from cfvs_maniskill.nets.checkpoint import WeightsError
 
     try:

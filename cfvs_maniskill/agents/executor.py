@@ -49,6 +49,14 @@ class ExecutorConfig:
     """A move that ends further than this (m) from its target is reported as not reached."""
     stall_steps: int = 6
     """Insertion ends when the tip advanced < 0.5 mm over this many steps."""
+    search_radius: float = 0.0
+    """Compliant search (as real assembly cells do): when the peg stalls on the hole's rim,
+    keep pressing lightly and slide it along a spiral of up to this radius (m) until it
+    drops in. 0 = off (the paper's plain insertion)."""
+    search_pitch: float = 0.0012
+    """Distance between the spiral's turns, m (below the clearance, so no gap is skipped)."""
+    search_speed: float = 0.02
+    """Sliding speed along the spiral, m/s."""
 
 
 class Executor:
@@ -126,19 +134,38 @@ class Executor:
             )
         return MoveResult(True, "", self.steps - steps0)
 
-    def insert(self, depth: float) -> MoveResult:
-        """Push the peg `depth` metres along its own axis (its +z), with bounded force."""
+    def insert(self, depth: float, entry: float = 0.0) -> MoveResult:
+        """Push the peg `depth` metres along its own axis (its +z), with bounded force.
+
+        `entry` is the travel at which the tip should pass the hole's opening; a stall
+        before entry + 5 mm means the peg sits on the rim, which starts the spiral search
+        when `search_radius` > 0.
+        """
         T0 = self.env.tcp_matrix()
         axis = T0[:3, 2]
         q = self.env.agent.robot.get_qpos()[0].cpu().numpy()
         cmd = 0.0
         history = [0.0]
         steps0 = self.steps
+        lateral = np.zeros(3)
+        spiral: dict | None = None  # search state once started
         while cmd < depth:
             done = float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis)
             cmd = min(depth, cmd + self.cfg.insert_speed * self.dt, done + self.cfg.max_lead)
+            if spiral is not None:
+                if done > spiral["stalled_at"] + 0.003:
+                    spiral = None  # dropped into the hole: straight down from here
+                else:
+                    # Archimedean spiral r = pitch * angle / 2pi, walked at search_speed.
+                    r = max(self.cfg.search_pitch * spiral["angle"] / (2 * np.pi), 1e-4)
+                    spiral["angle"] += self.cfg.search_speed * self.dt / r
+                    r = self.cfg.search_pitch * spiral["angle"] / (2 * np.pi)
+                    if r > self.cfg.search_radius:
+                        break  # searched the whole disc: give up on this insertion
+                    a = spiral["angle"]
+                    lateral = T0[:3, :3] @ np.array([r * np.cos(a), r * np.sin(a), 0.0])
             T = T0.copy()
-            T[:3, 3] = T0[:3, 3] + cmd * axis
+            T[:3, 3] = T0[:3, 3] + cmd * axis + lateral
             q_prev = q
             q, ok = self.env.ik(T, q)
             if not ok:
@@ -146,7 +173,11 @@ class Executor:
             self._step(q, (q - q_prev) / self.dt)
             history.append(float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis))
             k = self.cfg.stall_steps
-            if len(history) > k and history[-1] - history[-1 - k] < 0.0005:
+            if spiral is None and len(history) > k and history[-1] - history[-1 - k] < 0.0005:
+                on_rim = history[-1] < entry + 0.005
+                if on_rim and self.cfg.search_radius > 0 and not np.any(lateral):
+                    spiral = {"angle": 0.0, "stalled_at": history[-1]}
+                    continue
                 break  # blocked: on the rim or at the bottom
         for _ in range(self.cfg.settle_steps):
             self._step(q)

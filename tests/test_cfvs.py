@@ -106,7 +106,10 @@ def test_cfvs_inserts_on_unseen_objects(make_env, env_id):
     ex = Executor(env)
     results = [run_episode(env, agent, ex, seed=s) for s in range(500, 508)]
     ok = sum(r.success for r in results)
-    assert ok >= 6, [(r.object, r.reason) for r in results]
+    # Measured over 200 episodes per cell (README): 3-DoF 1.00, 6-DoF ~0.95.
+    assert ok >= (7 if env_id.startswith("PegInsert3DoF") else 6), [
+        (r.object, r.reason) for r in results
+    ]
     assert all(r.reason or r.success for r in results)
 
 

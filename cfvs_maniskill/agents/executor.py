@@ -49,7 +49,7 @@ class ExecutorConfig:
     """A move that ends further than this (m) from its target is reported as not reached."""
     stall_steps: int = 6
     """Insertion ends when the tip advanced < 0.5 mm over this many steps."""
-    search_radius: float = 0.0
+    search_radius: float = 0.008
     """Compliant search (as real assembly cells do): when the peg stalls on the hole's rim,
     keep pressing lightly and slide it along a spiral of up to this radius (m) until it
     drops in. 0 = off (the paper's plain insertion)."""

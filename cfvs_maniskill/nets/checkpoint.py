@@ -29,7 +29,7 @@ class WeightsError(ValueError):
     """A weights file that cannot be used; the message names the file and what it holds."""
 
 
-def file_sha256(path: Path, limit: int | None = None) -> str:
+def file_sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
         while chunk := f.read(1 << 23):

@@ -126,3 +126,30 @@ def test_agent_gives_up_with_a_reason_when_it_sees_nothing(make_env):
     agent.stage = "fine"
     a = agent.act(Observation(empty, env.unwrapped.tcp_matrix()))
     assert a.kind == "give_up" and "OPN" in a.reason
+
+
+@pytest.mark.slow
+def test_same_seed_same_cfvs_episodes_across_processes(tmp_path):
+    import json
+
+    from .conftest import run_cli
+
+    rows = []
+    for i in range(2):
+        out = tmp_path / f"r{i}.jsonl"
+        r = run_cli(
+            "cfvs_maniskill.run",
+            "--task",
+            "PegInsert6DoF",
+            "--episodes",
+            "2",
+            "--seed",
+            "41",
+            "--out",
+            str(out),
+        )
+        assert r.returncode == 0, r.stderr[-2000:]
+        rows.append([json.loads(line) for line in out.read_text().splitlines()])
+    for a, b in zip(*rows, strict=True):
+        a.pop("wall_time_s"), b.pop("wall_time_s")
+        assert a == b

@@ -27,6 +27,7 @@ from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data.clouds import (
+    MIN_OBJECT_POINTS,
     fine_crop,
     object_points,
     sample_fixed,
@@ -102,7 +103,7 @@ class CFVSAgent(Agent):
     def estimate_hole(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
         """OAKN + Algorithm 1: the hole's world frame from one wrist cloud, or None."""
         pts = object_points(xyzw, tcp, self.peg)
-        if len(pts) < 32:
+        if len(pts) < MIN_OBJECT_POINTS:
             return None
         x = torch.from_numpy(sample_fixed(pts, int(self.oakn_meta["points"]), self.rng))[None]
         offsets, logits = self.oakn(x)
@@ -115,7 +116,7 @@ class CFVSAgent(Agent):
     def predict_offset(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
         """OPN: (dt, dr) in the tool frame to the pre-insertion pose, or None."""
         pts = fine_crop(object_points(xyzw, tcp, self.peg))
-        if len(pts) < 32:
+        if len(pts) < MIN_OBJECT_POINTS:
             return None
         n = int(self.opn_meta["points"])
         x = torch.from_numpy(

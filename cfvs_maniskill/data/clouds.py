@@ -18,6 +18,8 @@ TABLE_MARGIN = 0.006
 """Points below this world height are the table (its top is z = 0; 6 sigma of 1 mm noise)."""
 PEG_MARGIN = 0.004
 """Points within this distance of the peg's known volume are the peg itself."""
+MIN_OBJECT_POINTS = 32
+"""Fewer object points than this is no usable view: collection redraws, agents give up."""
 MAX_RANGE = 0.5
 """Points further than this from the tool are beyond any hole the task places (init error
 <= 30 cm plus the object): the far robot base and table edges, dropped."""

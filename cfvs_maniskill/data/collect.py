@@ -26,7 +26,13 @@ from tqdm import tqdm
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data import store
-from cfvs_maniskill.data.clouds import fine_crop, object_points, sample_fixed, world_to_tool
+from cfvs_maniskill.data.clouds import (
+    MIN_OBJECT_POINTS,
+    fine_crop,
+    object_points,
+    sample_fixed,
+    world_to_tool,
+)
 from cfvs_maniskill.data.procedural import procedural_specs
 from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
 
@@ -154,7 +160,7 @@ class Collector:
     def _coarse(self, u, obs, H, rng, i):
         tcp = u.tcp_matrix()
         pts = object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, self.task.peg)
-        if len(pts) < 32:
+        if len(pts) < MIN_OBJECT_POINTS:
             return None  # the camera hardly sees the object: redraw
         pts = sample_fixed(pts, self.args.points, rng)
         k = world_to_tool(L.keypoints_world(H, tcp, self.task.peg), tcp)
@@ -189,7 +195,7 @@ class Collector:
         tcp = u.tcp_matrix()  # what the robot really reached (IK is exact to < 1 mm)
         target = u.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp)
         pts = fine_crop(object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, task.peg))
-        if len(pts) < 32:
+        if len(pts) < MIN_OBJECT_POINTS:
             return None  # the crop sees (almost) nothing: not a useful sample
         pts = sample_fixed(pts, self.args.points, rng)
         row = self._common(u, pts, tcp, H, i)

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # One-time (idempotent) set-up of cfvs_maniskill on a Debian 12 machine as root:
-#   - system libraries SAPIEN's renderer needs (libx11-6),
+#   - system libraries SAPIEN's renderer (libx11-6) and open3d (libusb-1.0-0) need,
 #   - a Python 3.11 virtual environment in .venv with the package (editable) and its pins,
 #   - SwiftShader (a CPU Vulkan driver) taken out of Debian's chromium-common .deb, used by
 #     the package only when no GPU is present.
@@ -26,6 +26,8 @@ need_apt() {
 # 1. System libraries (only what is missing).
 missing=()
 ldconfig -p | grep 'libX11.so.6' >/dev/null || missing+=(libx11-6)
+# open3d (ICP / RANSAC baselines) links libusb even in its CPU build.
+ldconfig -p | grep 'libusb-1.0.so.0' >/dev/null || missing+=(libusb-1.0-0)
 python3.11 -m venv --help >/dev/null 2>&1 || missing+=(python3.11-venv)
 command -v python3.11 >/dev/null || missing+=(python3.11)
 if [ ${#missing[@]} -gt 0 ]; then

@@ -22,8 +22,8 @@ import numpy as np
 import torch
 import yaml
 
-from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
+from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data.clouds import (
@@ -131,15 +131,7 @@ class CFVSAgent(Agent):
         return np.mean(acts, axis=0).astype(np.float64)
 
     def constrain(self, T: np.ndarray) -> np.ndarray:
-        """Keep only the task's degrees of freedom: 3 / 4-DoF holes are upright, so the peg
-        points straight down (4-DoF keeps the estimated yaw, 3-DoF the current one)."""
-        if self.env.task.dof == 6:
-            return T
-        down = np.array([0.0, 0.0, -1.0])
-        x = T[:3, 0] if self.env.task.dof == 4 else self.env.tcp_matrix()[:3, 0]
-        out = T.copy()
-        out[:3, :3] = G.frame_with_z(down, x)
-        return out
+        return constrain(self.env, T)
 
     # ------------------------------------------------------------------ decisions
     def act(self, observation: Observation) -> Action:

@@ -25,12 +25,31 @@ def _cfvs(**switches) -> Callable[..., Agent]:
     return make
 
 
+def _icp(init: str) -> Callable[..., Agent]:
+    def make(env) -> Agent:
+        from cfvs_maniskill.agents.icp import ICPAgent, ICPConfig
+
+        return ICPAgent(env, ICPConfig(init=init))
+
+    return make
+
+
+def _hole_detect(env) -> Agent:
+    from cfvs_maniskill.agents.hole_detect import HoleDetectAgent
+
+    return HoleDetectAgent(env)
+
+
 AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs": _cfvs(),
     # The paper's ablations (Table IV).
     "cfvs_no_c2f": _cfvs(coarse_to_fine=False),
     "cfvs_no_map": _cfvs(confidence_map=False),
     "cfvs_no_aug": _cfvs(augmentation=False),
+    # The paper's baselines (Table II).
+    "icp": _icp("workspace"),
+    "icp_kpts": _icp("oakn"),
+    "3drhd": _hole_detect,
     "oracle": _oracle,
 }
 AGENT_OBS_MODES = {"oracle": "state"}

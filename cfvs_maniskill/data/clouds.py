@@ -46,10 +46,13 @@ def tool_to_world(points: np.ndarray, tcp: np.ndarray) -> np.ndarray:
     return (points @ tcp[:3, :3].T + tcp[:3, 3]).astype(np.float32)
 
 
-def object_points(xyzw: np.ndarray, tcp: np.ndarray, peg: str) -> np.ndarray:
-    """Tool-frame points of everything but the table and the peg."""
+def object_points(
+    xyzw: np.ndarray, tcp: np.ndarray, peg: str, keep_table: bool = False
+) -> np.ndarray:
+    """Tool-frame points of everything but the table (unless `keep_table`) and the peg."""
     world = valid_world_points(xyzw)
-    world = world[world[:, 2] > TABLE_MARGIN]
+    if not keep_table:
+        world = world[world[:, 2] > TABLE_MARGIN]
     p = world_to_tool(world, tcp)
     p = p[np.linalg.norm(p, axis=1) <= MAX_RANGE]
     half = peg_half_extent(peg) + PEG_MARGIN

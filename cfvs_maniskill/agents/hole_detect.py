@@ -72,8 +72,9 @@ def _rectangle_axis(cells: np.ndarray) -> float:
     return float(best)
 
 
-def holes_on_plane(points: np.ndarray, n: np.ndarray, d: float, peg: str, clearance: float,
-                   cfg: HoleDetectConfig) -> list[HoleCandidate]:
+def holes_on_plane(
+    points: np.ndarray, n: np.ndarray, d: float, peg: str, clearance: float, cfg: HoleDetectConfig
+) -> list[HoleCandidate]:
     """Enclosed, hole-sized empty regions among one plane's inlier points."""
     u, v = _plane_basis(n)
     uv = np.stack([points @ u, points @ v], axis=1)
@@ -109,8 +110,9 @@ def holes_on_plane(points: np.ndarray, n: np.ndarray, d: float, peg: str, cleara
     return out
 
 
-def detect_hole(world: np.ndarray, camera: np.ndarray, peg: str, clearance: float,
-                cfg: HoleDetectConfig) -> HoleCandidate | None:
+def detect_hole(
+    world: np.ndarray, camera: np.ndarray, peg: str, clearance: float, cfg: HoleDetectConfig
+) -> HoleCandidate | None:
     """The most hole-like enclosed gap on any plane of the scene, or None."""
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(world.astype(np.float64)))
     o3d.utility.random.seed(0)

@@ -65,7 +65,9 @@ class ICPAgent(Agent):
         self.env = env.unwrapped
         self.cfg = cfg or ICPConfig()
         if self.cfg.init not in ("workspace", "oakn"):
-            raise ValueError(f"ICPConfig.init: expected 'workspace' or 'oakn', got {self.cfg.init!r}")
+            raise ValueError(
+                f"ICPConfig.init: expected 'workspace' or 'oakn', got {self.cfg.init!r}"
+            )
         self.name = "icp" if self.cfg.init == "workspace" else "icp_kpts"
         task = self.env.task
         spec = load_library().select([self.cfg.model], profile=task.peg)[0]

@@ -40,6 +40,12 @@ def _hole_detect(env) -> Agent:
     return HoleDetectAgent(env)
 
 
+def _kovis(env) -> Agent:
+    from cfvs_maniskill.agents.kovis import KOVISAgent
+
+    return KOVISAgent(env)
+
+
 AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs": _cfvs(),
     # The paper's ablations (Table IV).
@@ -50,9 +56,10 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "icp": _icp("workspace"),
     "icp_kpts": _icp("oakn"),
     "3drhd": _hole_detect,
+    "kovis": _kovis,
     "oracle": _oracle,
 }
-AGENT_OBS_MODES = {"oracle": "state"}
+AGENT_OBS_MODES = {"oracle": "state", "kovis": "rgbd"}
 """Agents not listed here see the wrist point cloud."""
 DEFAULT_AGENT = "cfvs"
 

@@ -9,6 +9,10 @@ start and the perturbation -- so a resumed collection continues exactly where it
   (-dt, -dtheta, ranges from the task file); the cropped cloud and the action (dt, dtheta)
   that undoes it. The robot is set to the perturbed pose directly (no motion is needed to
   render what the camera would see there).
+* kovis (the KOVIS baseline): grayscale + depth wrist images at poses along the way from
+  the start to the pre-insertion pose (more of them near the goal, each moved off the
+  straight path a little, within the task's degrees of freedom), and the tool-frame motion
+  (dt, dtheta) to the pre-insertion pose.
 """
 
 from __future__ import annotations
@@ -51,7 +55,8 @@ class CollectArgs:
     task: str = "PegInsert6DoF"
     """Task name (a file in tasks/)."""
     kind: str = "coarse"
-    """coarse (OAKN: keypoints + confidence) or fine (OPN: actions)."""
+    """coarse (OAKN: keypoints + confidence), fine (OPN: actions) or kovis (images +
+    motion to the goal, for the KOVIS baseline)."""
     samples: int = 2000
     """Total number of samples the file should hold."""
     out: Path = Path("data/coarse.h5")
@@ -119,7 +124,7 @@ class Collector:
                 self.env.close()
             self.env = gym.make(
                 f"{self.args.task}-v1",
-                obs_mode="pointcloud",
+                obs_mode="rgbd" if self.args.kind == "kovis" else "pointcloud",
                 objects=tuple(self.groups[group]),
                 assets=tuple(self.assets),
             )
@@ -138,7 +143,7 @@ class Collector:
         lo, hi = min(task.init_error.values()), max(task.init_error.values())
         u.init_error_m = float(rng.uniform(lo, hi))
         # The fine kind looks only after moving the peg: skip rendering the start view.
-        u.defer_obs = args.kind == "fine"
+        u.defer_obs = args.kind in ("fine", "kovis")
         try:
             obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)), options={"object": obj})
         finally:
@@ -146,6 +151,8 @@ class Collector:
         H = u.hole_pose.copy()
         if args.kind == "coarse":
             return self._coarse(u, obs, H, rng, i)
+        if args.kind == "kovis":
+            return self._kovis(u, H, rng, i)
         return self._fine(u, H, rng, i)
 
     def _common(self, u, points, tcp, H, i):
@@ -202,6 +209,40 @@ class Collector:
         row.update(action=L.fine_action(tcp, target), target_pose=target)
         return row
 
+    def _kovis(self, u, H, rng, i):
+        from cfvs_maniskill.agents.task_dof import constrain
+        from cfvs_maniskill.data.images import wrist_images
+
+        task = self.task
+        start = u.tcp_matrix()
+        goal = u.insertion_pose(-PRE_INSERT_HEIGHT, H, start)
+        q_seed = u.agent.robot.get_qpos()[0].numpy()
+        for _ in range(50):
+            s = float(rng.uniform()) ** 1.5  # 0: at the goal, 1: at the start
+            T = G.interpolate(goal, constrain(u, start, ref=start), s)
+            off = L.random_offset(rng, 0.005 + 0.02 * s, 5.0, 10.0 if task.dof > 3 else 0.0)
+            T = constrain(u, T @ off, ref=start)
+            if (G.inv(H) @ T)[2, 3] < 0.005:
+                continue  # the tip would be inside the object
+            q, ok = u.ik(T, q_seed)
+            if ok:
+                break
+        else:
+            return None
+        u.agent.reset(torch.as_tensor(q, dtype=torch.float32)[None])
+        tcp = u.tcp_matrix()
+        gray, depth = wrist_images(u.get_obs())
+        return {
+            "gray": gray,
+            "depth": depth.astype(np.float16),
+            "action": L.fine_action(tcp, goal),
+            "tcp_pose": tcp,
+            "hole_pose": H,
+            "target_pose": goal,
+            "object": np.array(u.episode_info["object"]),
+            "sample_index": np.array(i, dtype=np.int64),
+        }
+
     def close(self):
         if self.env is not None:
             self.env.close()
@@ -211,8 +252,8 @@ def collect(args: CollectArgs) -> int:
     """Collect until `args.out` holds `args.samples` samples; return the count."""
     from cfvs_maniskill.envs.task_config import TaskConfigError, load_tasks
 
-    if args.kind not in ("coarse", "fine"):
-        raise store.DatasetError(f"--kind: expected coarse or fine, got {args.kind!r}")
+    if args.kind not in ("coarse", "fine", "kovis"):
+        raise store.DatasetError(f"--kind: expected coarse, fine or kovis, got {args.kind!r}")
     tasks = load_tasks()
     if args.task not in tasks:
         raise TaskConfigError(args.task, "task", f"unknown task; valid: {', '.join(tasks)}")

@@ -1,6 +1,6 @@
 """Weights files: one torch file per network with everything needed to trust it.
 
-A weights file holds the state dict plus: which network (oakn | opn), its architecture
+A weights file holds the state dict plus: which network (oakn | opn | opnv | kovis), its architecture
 config, the task and peg profile of its training data, the data file's sha256, the
 training arguments, the validation metrics and the wall time. Loading checks all of it
 and says exactly what is wrong with a file that does not fit.
@@ -16,10 +16,16 @@ from typing import Any
 
 import torch
 
+from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig
 from cfvs_maniskill.nets.oakn import OAKN, OAKNConfig
 from cfvs_maniskill.nets.opn import OPN, OPNConfig
 
-NETS = {"oakn": (OAKN, OAKNConfig), "opn": (OPN, OPNConfig), "opnv": (OAKN, OAKNConfig)}
+NETS = {
+    "oakn": (OAKN, OAKNConfig),
+    "opn": (OPN, OPNConfig),
+    "opnv": (OAKN, OAKNConfig),
+    "kovis": (KOVIS, KOVISConfig),
+}
 """opnv: the fine stage as dense keypoint voting (OAKN's architecture on the fine crop);
 see `train.py` for why it replaced the global-regression OPN in the shipped agent."""
 WEIGHTS_FORMAT = "cfvs_maniskill.weights/1"

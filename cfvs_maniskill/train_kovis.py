@@ -1,0 +1,185 @@
+"""Train the KOVIS baseline on CPU: `python -m cfvs_maniskill.train_kovis --data FILE ...`.
+
+Data: `python -m cfvs_maniskill.data collect --kind kovis` files (several may be mixed,
+e.g. the 4-DoF and 6-DoF square-peg sets). Writes OUT (weights + config + data hashes +
+validation metrics + wall time) and OUT.json (the same metadata for people).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+import tyro
+from tqdm import tqdm
+
+from cfvs_maniskill.data.images import DEPTH_RANGE
+from cfvs_maniskill.data.store import DatasetError, load
+from cfvs_maniskill.nets.checkpoint import WEIGHTS_FORMAT, file_sha256, save_atomic
+from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig, kovis_loss, motion_targets
+
+
+@dataclass
+class TrainKOVISArgs:
+    """Train KOVIS (keypoint encoder + depth decoder + servo converter) jointly on CPU."""
+
+    data: tuple[Path, ...] = (Path("data/kovis.h5"),)
+    """One or more `--kind kovis` dataset files (same peg)."""
+    out: Path = Path("agents/kovis/square.pt")
+    """Weights file to write."""
+    dof: int = 6
+    """Motion dimensions the converter outputs: 3 (x y z), 4 (+ yaw) or 6."""
+    epochs: int = 10
+    batch: int = 64
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    noise: float = 4.0
+    """Gray-level noise std added to training images (KOVIS trains with image noise)."""
+    val_fraction: float = 0.05
+    """The last samples of each file, held out for validation metrics."""
+    threads: int = 0
+    """torch threads (0: all cores)."""
+    seed: int = 0
+
+
+def depth_target(depth: np.ndarray) -> torch.Tensor:
+    """(B, S, S) metres -> (B, S/2, S/2) in [0, 1], the decoder's target."""
+    d = torch.from_numpy(depth.astype(np.float32))[:, None]
+    d = F.avg_pool2d(d, 2)[:, 0]
+    return (d - DEPTH_RANGE[0]) / (DEPTH_RANGE[1] - DEPTH_RANGE[0])
+
+
+def load_sets(files: tuple[Path, ...]) -> tuple[dict, dict, list[str]]:
+    """Concatenated train / validation arrays and the files' sha256."""
+    train: dict[str, list] = {"gray": [], "depth": [], "action": []}
+    val: dict[str, list] = {"gray": [], "depth": [], "action": []}
+    pegs, shas = set(), []
+    for f in files:
+        attrs, d = load(f, ("gray", "depth", "action"))
+        if attrs.get("kind") != "kovis":
+            raise DatasetError(
+                f"{f}: field 'kind': KOVIS trains on a kovis dataset, this file is "
+                f"{attrs.get('kind')}"
+            )
+        pegs.add(attrs["peg"])
+        m = len(d["action"])
+        n_val = max(1, int(0.05 * m))
+        for k in train:
+            train[k].append(d[k][: m - n_val])
+            val[k].append(d[k][m - n_val :])
+        shas.append(file_sha256(f))
+    if len(pegs) != 1:
+        raise DatasetError(f"--data: files for different pegs ({', '.join(sorted(pegs))})")
+    cat = {k: np.concatenate(v) for k, v in train.items()}
+    vcat = {k: np.concatenate(v) for k, v in val.items()}
+    return cat | {"peg": pegs.pop()}, vcat, shas
+
+
+@torch.no_grad()
+def validate(model: KOVIS, val: dict) -> dict[str, float]:
+    model.eval()
+    dirs, speeds, depths = [], [], []
+    for a in range(0, len(val["action"]), 128):
+        g = torch.from_numpy(val["gray"][a : a + 128])
+        act = torch.from_numpy(val["action"][a : a + 128].astype(np.float32))
+        _, depth, direction, speed = model(g)
+        want_dir, want_speed = motion_targets(act, model.cfg)
+        cos = F.cosine_similarity(direction, want_dir, dim=-1).clamp(-1, 1)
+        far = want_speed > 0.1  # the direction of a tiny offset is mostly noise
+        dirs.append(torch.rad2deg(torch.acos(cos[far])).numpy())
+        speeds.append((torch.sigmoid(speed) - want_speed).abs().numpy())
+        t = depth_target(val["depth"][a : a + 128])
+        depths.append(
+            (depth[:, 0] - t).abs().mean((1, 2)).numpy() * (DEPTH_RANGE[1] - DEPTH_RANGE[0])
+        )
+    model.train()
+    d, s, z = (np.concatenate(x) for x in (dirs, speeds, depths))
+    return {
+        "direction_err_deg_mean": float(d.mean()),
+        "direction_err_deg_p90": float(np.percentile(d, 90)),
+        "speed_abs_err_mean": float(s.mean()),
+        "depth_err_mm_mean": float(1000 * z.mean()),
+    }
+
+
+def train(args: TrainKOVISArgs) -> dict:
+    if args.dof not in (3, 4, 6):
+        raise DatasetError(f"--dof: expected 3, 4 or 6, got {args.dof}")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    data, val, shas = load_sets(args.data)
+    cfg = KOVISConfig(motion_dims=args.dof)
+    torch.manual_seed(args.seed)
+    model = KOVIS(cfg)
+    opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
+    m = len(data["action"])
+    steps = math.ceil(m / args.batch)
+    sched = torch.optim.lr_scheduler.OneCycleLR(
+        opt, max_lr=args.lr, total_steps=args.epochs * steps, pct_start=0.1
+    )
+    history, t0 = [], time.perf_counter()
+    for epoch in range(args.epochs):
+        rng = np.random.default_rng([args.seed, epoch])
+        order = rng.permutation(m)
+        bar = tqdm(range(steps), desc=f"kovis epoch {epoch + 1}/{args.epochs}", unit="batch")
+        for s in bar:
+            idx = np.sort(order[s * args.batch : (s + 1) * args.batch])
+            gray = data["gray"][idx].astype(np.float32)
+            gray += rng.normal(0, args.noise, gray.shape).astype(np.float32)
+            gray = torch.from_numpy(gray.clip(0, 255))
+            act = torch.from_numpy(data["action"][idx].astype(np.float32))
+            loss, parts = kovis_loss(model(gray), depth_target(data["depth"][idx]), act, cfg)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            if s % 10 == 0:
+                bar.set_postfix(
+                    loss=f"{float(loss):.3f}", **{k: f"{v:.3f}" for k, v in parts.items()}
+                )
+        metrics = validate(model, val)
+        history.append({"epoch": epoch + 1, **metrics})
+        print(f"epoch {epoch + 1}: " + ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()))
+    wall = time.perf_counter() - t0
+    meta = {
+        "format": WEIGHTS_FORMAT,
+        "net": "kovis",
+        "task": ",".join(str(p) for p in args.data),
+        "peg": data["peg"],
+        "config": dataclasses.asdict(cfg),
+        "data": [str(p) for p in args.data],
+        "data_sha256": shas,
+        "data_samples": m + len(val["action"]),
+        "train_args": {k: str(v) for k, v in dataclasses.asdict(args).items()},
+        "command": "python -m cfvs_maniskill.train_kovis " + " ".join(sys.argv[1:]),
+        "validation": history[-1],
+        "history": history,
+        "wall_time_s": round(wall, 1),
+        "torch_threads": torch.get_num_threads(),
+    }
+    save_atomic({**meta, "state_dict": model.state_dict()}, args.out)
+    args.out.with_suffix(".json").write_text(json.dumps(meta, indent=1))
+    print(f"wrote {args.out} ({wall / 60:.1f} min)")
+    return meta
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = tyro.cli(TrainKOVISArgs, args=argv)
+    try:
+        train(args)
+    except DatasetError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

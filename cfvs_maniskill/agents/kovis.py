@@ -4,7 +4,8 @@ keypoints, step by step until the converter says "arrived", then insertion.
 Each decision: the wrist image -> keypoints -> a unit motion direction (tool frame, the
 task's degrees of freedom) and a speed in (0, 1); the peg moves `speed * speed_range`
 along the direction (so a far goal is approached in steps of at most `speed_range`).
-It stops when the speed says the goal is within `stop_distance`. In 3 / 4-DoF tasks the
+It stops when the speed says the goal is within `stop_distance`, or when that predicted
+distance has stopped shrinking (the servo circles the goal at its precision). In 3 / 4-DoF tasks the
 peg is first turned to point straight down where it is (the servo was trained on upright
 poses there), as every agent keeps the task's degrees of freedom.
 """
@@ -37,6 +38,12 @@ class KOVISAgentConfig:
     """Arrived when the predicted distance (speed * speed_range) is below this, metres."""
     max_steps: int = 25
     """Servo steps before inserting anyway."""
+    patience: int = 3
+    """Also arrived when the predicted distance has not improved for this many steps: the
+    servo is circling the goal at the limit of its precision."""
+    gain: float = 0.6
+    """Fraction of the predicted distance moved per step (a visual servo's lambda): a
+    full step overshoots by the speed's error and runs the peg into the object."""
 
 
 class KOVISAgent(Agent):
@@ -51,10 +58,12 @@ class KOVISAgent(Agent):
         self.max_decisions = self.cfg.max_steps + 2
         self.steps = 0
         self.upright = False
+        self.best, self.stalled = np.inf, 0
 
     def reset(self, info: dict) -> None:
         self.steps = 0
         self.upright = self.env.task.dof == 6
+        self.best, self.stalled = np.inf, 0
 
     @torch.no_grad()
     def motion(self, obs: dict) -> tuple[np.ndarray, float]:
@@ -63,7 +72,7 @@ class KOVISAgent(Agent):
         _, _, direction, speed_logit = self.net(torch.from_numpy(gray)[None])
         cfg = self.net.cfg
         speed = float(torch.sigmoid(speed_logit[0]))
-        step = direction[0].numpy().astype(np.float64) * speed * cfg.speed_range
+        step = direction[0].numpy().astype(np.float64) * speed * cfg.speed_range * self.cfg.gain
         action = np.zeros(6)
         action[MOTION_DIMS[cfg.motion_dims]] = step
         action[3:] /= cfg.rot_scale
@@ -79,7 +88,9 @@ class KOVISAgent(Agent):
         action, distance = self.motion(observation.obs)
         if not np.all(np.isfinite(action)):
             return Action.give_up("KOVIS: the servo network returned a non-finite motion")
-        if distance < self.cfg.stop_distance:
+        self.stalled = 0 if distance < self.best else self.stalled + 1
+        self.best = min(self.best, distance)
+        if distance < self.cfg.stop_distance or self.stalled >= self.cfg.patience:
             return Action.insert()
         self.steps += 1
         return Action.move(constrain(self.env, L.apply_action(tcp, action), ref=tcp))

@@ -9,7 +9,6 @@ OUT.json the same metadata for people.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import sys
 import time
@@ -24,7 +23,7 @@ from tqdm import tqdm
 from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data.augment import AugmentConfig, augment
 from cfvs_maniskill.data.store import DatasetError, load
-from cfvs_maniskill.nets.checkpoint import WEIGHTS_FORMAT, build, file_sha256, save_atomic
+from cfvs_maniskill.nets.checkpoint import build, file_sha256, save_atomic, write_weights
 from cfvs_maniskill.nets.oakn import OAKNConfig, oakn_loss, weighted_keypoints
 from cfvs_maniskill.nets.opn import OPNConfig, opn_loss
 from cfvs_maniskill.nets.pointnet2 import seed_sampling
@@ -256,7 +255,6 @@ def train(args: TrainArgs) -> dict:
             print(f"stopped after {args.max_minutes} min; run the same command to resume")
             return state
     meta = {
-        "format": WEIGHTS_FORMAT,
         "net": args.net,
         "task": attrs["task"],
         "peg": attrs["peg"],
@@ -265,28 +263,27 @@ def train(args: TrainArgs) -> dict:
         "data": str(args.data),
         "data_sha256": sha,
         "data_samples": m,
-        "train_args": {k: str(v) for k, v in dataclasses.asdict(args).items()},
-        "command": "python -m cfvs_maniskill.train " + " ".join(sys.argv[1:]),
-        "validation": state["history"][-1],
-        "history": state["history"],
-        "wall_time_s": round(state["wall_s"], 1),
-        "torch_threads": torch.get_num_threads(),
     }
-    save_atomic({**meta, "state_dict": model.state_dict()}, args.out)
-    args.out.with_suffix(".json").write_text(json.dumps(meta, indent=1))
+    write_weights(
+        args.out, model, meta, "cfvs_maniskill.train", args, state["history"], state["wall_s"]
+    )
     resume_path.unlink(missing_ok=True)
-    print(f"wrote {args.out} ({state['wall_s'] / 60:.1f} min)")
     return state
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = tyro.cli(TrainArgs, args=argv)
+def cli_main(args_type, train_fn, argv: list[str] | None = None) -> int:
+    """Parse a training CLI, train; a bad dataset or argument -> message and exit code 2."""
+    args = tyro.cli(args_type, args=argv)
     try:
-        train(args)
+        train_fn(args)
     except DatasetError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return cli_main(TrainArgs, train, argv)
 
 
 if __name__ == "__main__":

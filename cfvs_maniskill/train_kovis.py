@@ -8,7 +8,6 @@ validation metrics + wall time) and OUT.json (the same metadata for people).
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import sys
 import time
@@ -18,12 +17,11 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
-import tyro
 from tqdm import tqdm
 
 from cfvs_maniskill.data.images import DEPTH_RANGE
 from cfvs_maniskill.data.store import DatasetError, load
-from cfvs_maniskill.nets.checkpoint import WEIGHTS_FORMAT, file_sha256, save_atomic
+from cfvs_maniskill.nets.checkpoint import file_sha256, write_weights
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig, kovis_loss, motion_targets
 
 
@@ -150,7 +148,6 @@ def train(args: TrainKOVISArgs) -> dict:
         print(f"epoch {epoch + 1}: " + ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()))
     wall = time.perf_counter() - t0
     meta = {
-        "format": WEIGHTS_FORMAT,
         "net": "kovis",
         "task": ",".join(str(p) for p in args.data),
         "peg": data["peg"],
@@ -158,27 +155,15 @@ def train(args: TrainKOVISArgs) -> dict:
         "data": [str(p) for p in args.data],
         "data_sha256": shas,
         "data_samples": m + len(val["action"]),
-        "train_args": {k: str(v) for k, v in dataclasses.asdict(args).items()},
-        "command": "python -m cfvs_maniskill.train_kovis " + " ".join(sys.argv[1:]),
-        "validation": history[-1],
-        "history": history,
-        "wall_time_s": round(wall, 1),
-        "torch_threads": torch.get_num_threads(),
     }
-    save_atomic({**meta, "state_dict": model.state_dict()}, args.out)
-    args.out.with_suffix(".json").write_text(json.dumps(meta, indent=1))
-    print(f"wrote {args.out} ({wall / 60:.1f} min)")
+    meta = write_weights(args.out, model, meta, "cfvs_maniskill.train_kovis", args, history, wall)
     return meta
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = tyro.cli(TrainKOVISArgs, args=argv)
-    try:
-        train(args)
-    except DatasetError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    return 0
+    from cfvs_maniskill.train import cli_main
+
+    return cli_main(TrainKOVISArgs, train, argv)
 
 
 if __name__ == "__main__":

@@ -169,3 +169,41 @@ def test_show_draws_a_png(coarse_file, fine_file, tmp_path):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
     r = run_cli("cfvs_maniskill.data", "show", str(coarse_file), "--index", "99")
     assert r.returncode == 2 and "--index" in r.stderr and "12 samples" in r.stderr
+
+
+@pytest.fixture(scope="module")
+def kovis_file(tmp_path_factory):
+    out = tmp_path_factory.mktemp("kovis") / "kovis.h5"
+    collect(CollectArgs(task="PegInsert4DoF", kind="kovis", samples=12, out=out))
+    return out
+
+
+def test_kovis_samples_are_upright_images_with_the_motion_to_the_goal(kovis_file):
+    attrs, d = load(kovis_file)
+    assert attrs["kind"] == "kovis"
+    assert d["gray"].shape == (12, 64, 64) and d["gray"].dtype == np.uint8
+    assert d["depth"].shape == (12, 64, 64)
+    assert d["gray"].std() > 5  # a real image, not a blank
+    for tcp, goal, a in zip(d["tcp_pose"], d["target_pose"], d["action"], strict=True):
+        assert np.allclose(L.apply_action(tcp, a), goal, atol=1e-4)  # the label reaches the goal
+        assert tcp[2, 2] < -0.999  # 4-DoF: the peg points straight down
+
+
+def test_training_writes_weights_that_load(coarse_file, kovis_file, tmp_path):
+    """Both training commands end in a weights file that the agents' loader accepts, with
+    its command and metrics beside it."""
+    from cfvs_maniskill.nets.checkpoint import load_weights
+    from cfvs_maniskill.train import TrainArgs
+    from cfvs_maniskill.train import train as train_cfvs
+    from cfvs_maniskill.train_kovis import TrainKOVISArgs
+    from cfvs_maniskill.train_kovis import train as train_kovis
+
+    out = tmp_path / "oakn.pt"
+    train_cfvs(TrainArgs(net="oakn", data=coarse_file, out=out, epochs=1, batch=4, points=128))
+    _, meta = load_weights(out, "oakn", "square")
+    assert meta["command"].startswith("python -m cfvs_maniskill.train")
+    assert out.with_suffix(".json").is_file()
+    out = tmp_path / "square.pt"
+    train_kovis(TrainKOVISArgs(data=(kovis_file,), out=out, dof=4, epochs=1, batch=4))
+    net, meta = load_weights(out, "kovis", "square")
+    assert net.cfg.motion_dims == 4 and "direction_err_deg_mean" in meta["validation"]

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +58,25 @@ def save_atomic(obj: dict, path: Path) -> None:
     tmp = path.with_name(path.name + ".tmp")
     torch.save(obj, tmp)
     os.replace(tmp, path)
+
+
+def write_weights(out: Path, model, meta: dict, module: str, args, history: list, wall_s: float):
+    """Write a weights file and its .json twin: `meta` (net, task, peg, config, data) plus
+    what every training run records (arguments, command, metrics, wall time)."""
+    meta = {
+        "format": WEIGHTS_FORMAT,
+        **meta,
+        "train_args": {k: str(v) for k, v in dataclasses.asdict(args).items()},
+        "command": f"python -m {module} " + " ".join(sys.argv[1:]),
+        "validation": history[-1],
+        "history": history,
+        "wall_time_s": round(wall_s, 1),
+        "torch_threads": torch.get_num_threads(),
+    }
+    save_atomic({**meta, "state_dict": model.state_dict()}, out)
+    Path(out).with_suffix(".json").write_text(json.dumps(meta, indent=1))
+    print(f"wrote {out} ({wall_s / 60:.1f} min)")
+    return meta
 
 
 def load_weights(path: Path | str, net: str | tuple[str, ...], peg: str | None = None):

@@ -74,4 +74,4 @@ def oakn_loss(
     l1 = (offsets - offsets_gt).abs().sum(dim=-1).sum(dim=-1) * SCALE  # (B, N)
     l_kpts = (conf_gt * l1).mean()
     l_map = torch.sqrt(((torch.sigmoid(logits) - conf_gt) ** 2).mean() + 1e-12)
-    return l_kpts + l_map, {"l_kpts": float(l_kpts), "l_map": float(l_map)}
+    return l_kpts + l_map, {"l_kpts": l_kpts.item(), "l_map": l_map.item()}

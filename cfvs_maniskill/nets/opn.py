@@ -55,4 +55,4 @@ def opn_loss(pred: Tensor, gt: Tensor) -> tuple[Tensor, dict[str, float]]:
     l_t = torch.sqrt(((dt - dt_gt) ** 2).sum(dim=1).mean() + 1e-12)
     l_cos = (1 - F.cosine_similarity(dt, dt_gt, dim=1, eps=1e-6)).mean()
     l_r = torch.sqrt(((dr - dr_gt) ** 2).sum(dim=1).mean() + 1e-12)
-    return l_t + l_cos + l_r, {"l_trans": float(l_t), "l_cos": float(l_cos), "l_rot": float(l_r)}
+    return l_t + l_cos + l_r, {"l_trans": l_t.item(), "l_cos": l_cos.item(), "l_rot": l_r.item()}

@@ -231,7 +231,7 @@ def train(args: TrainArgs) -> dict:
             sched.step()
             if s % 10 == 0:
                 bar.set_postfix(
-                    loss=f"{float(loss):.3f}", **{k: f"{v:.3f}" for k, v in parts.items()}
+                    loss=f"{loss.item():.3f}", **{k: f"{v:.3f}" for k, v in parts.items()}
                 )
         metrics = validate(model, batches, val_idx, args.net)
         state = {

@@ -99,6 +99,16 @@ class Batches:
         return out
 
 
+def update(opt, sched, loss: torch.Tensor, parts: dict, bar=None) -> None:
+    """One optimiser + schedule step; show the losses on the progress bar if given."""
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+    sched.step()
+    if bar is not None:
+        bar.set_postfix(loss=f"{loss.item():.3f}", **{k: f"{v:.3f}" for k, v in parts.items()})
+
+
 def _angle_deg(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     cos = torch.nn.functional.cosine_similarity(a, b, dim=-1).clamp(-1, 1)
     return torch.rad2deg(torch.acos(cos))
@@ -225,14 +235,7 @@ def train(args: TrainArgs) -> dict:
                 loss, parts = oakn_loss(off, logit, b["offsets"], b["confidence"])
             else:
                 loss, parts = opn_loss(model(b["points"]), b["action"])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            sched.step()
-            if s % 10 == 0:
-                bar.set_postfix(
-                    loss=f"{loss.item():.3f}", **{k: f"{v:.3f}" for k, v in parts.items()}
-                )
+            update(opt, sched, loss, parts, bar if s % 10 == 0 else None)
         metrics = validate(model, batches, val_idx, args.net)
         state = {
             "epoch": epoch + 1,

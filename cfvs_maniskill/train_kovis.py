@@ -23,6 +23,7 @@ from cfvs_maniskill.data.images import DEPTH_RANGE
 from cfvs_maniskill.data.store import DatasetError, load
 from cfvs_maniskill.nets.checkpoint import file_sha256, write_weights
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig, kovis_loss, motion_targets
+from cfvs_maniskill.train import cli_main, update
 
 
 @dataclass
@@ -135,14 +136,7 @@ def train(args: TrainKOVISArgs) -> dict:
             gray = torch.from_numpy(gray.clip(0, 255))
             act = torch.from_numpy(data["action"][idx].astype(np.float32))
             loss, parts = kovis_loss(model(gray), depth_target(data["depth"][idx]), act, cfg)
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            sched.step()
-            if s % 10 == 0:
-                bar.set_postfix(
-                    loss=f"{float(loss):.3f}", **{k: f"{v:.3f}" for k, v in parts.items()}
-                )
+            update(opt, sched, loss, parts, bar if s % 10 == 0 else None)
         metrics = validate(model, val)
         history.append({"epoch": epoch + 1, **metrics})
         print(f"epoch {epoch + 1}: " + ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()))
@@ -161,8 +155,6 @@ def train(args: TrainKOVISArgs) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from cfvs_maniskill.train import cli_main
-
     return cli_main(TrainKOVISArgs, train, argv)
 
 

@@ -146,6 +146,9 @@ class HoleDetectAgent(Agent):
     def __init__(self, env, cfg: HoleDetectConfig | None = None):
         self.env = env.unwrapped
         self.cfg = cfg or HoleDetectConfig()
+        # One thread: open3d's parallel sums change with the thread count, and so would the
+        # episode (same seed -> same result on any machine); the clouds are small.
+        o3d.utility.set_max_threads(1)
         self.moved = False
 
     def reset(self, info: dict) -> None:

@@ -64,6 +64,9 @@ class ICPAgent(Agent):
     def __init__(self, env, cfg: ICPConfig | None = None):
         self.env = env.unwrapped
         self.cfg = cfg or ICPConfig()
+        # One thread: open3d's parallel sums change with the thread count, and so would the
+        # episode (same seed -> same result on any machine); the clouds are small.
+        o3d.utility.set_max_threads(1)
         if self.cfg.init not in ("workspace", "oakn"):
             raise ValueError(
                 f"ICPConfig.init: expected 'workspace' or 'oakn', got {self.cfg.init!r}"

@@ -1,0 +1,120 @@
+"""`python -m cfvs_maniskill.eval`: many agents x tasks x objects x initial errors, resumable.
+
+Every (task, agent, object, initial error, episode) is a job with a fixed seed; finished
+episodes append to OUT/episodes.jsonl. Killed at any moment and started again with the
+same arguments, it runs only the jobs that are missing. The same scene (seed) is used for
+every agent, so agents are compared on identical episodes.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+import tyro
+
+
+@dataclass
+class EvalArgs:
+    """Evaluate agents on peg-in-hole tasks; resumable JSON-lines results."""
+
+    out: Path = Path("results/eval")
+    """Output directory: episodes.jsonl (one line per finished episode) and summary.md."""
+    tasks: tuple[str, ...] = ("PegInsert3DoF", "PegInsert4DoF", "PegInsert6DoF")
+    agents: tuple[str, ...] = ("cfvs",)
+    """Agents (see `python -m cfvs_maniskill.run --help`), e.g. cfvs icp icp_kpts 3drhd kovis."""
+    objects: tuple[str, ...] = ("test",)
+    """Hole objects by name or split (train, test, all), per task those its peg fits."""
+    init_errors: tuple[Literal["small", "large"], ...] = ("small", "large")
+    episodes_per_object: int = 25
+    """Episodes per (task, agent, object, initial error)."""
+    seed: int = 0
+    """Base seed; each episode's seed is a stable hash of (task, object, error, episode, seed)."""
+    workers: int = 2
+    """Local worker processes (each reuses one env and one agent across episodes)."""
+    backend: Literal["local"] = "local"
+    assets: tuple[Path, ...] = ()
+    """Extra hole-object folders or files."""
+    search_radius: float = 0.008
+    """Compliant search radius of the shared executor, metres (0: the paper's protocol)."""
+
+
+def _fail(message: str) -> None:
+    print(f"error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def resolve(args: EvalArgs) -> dict[str, list[str]]:
+    """Task -> object names; unknown task / agent / object -> exit 2 with the valid names."""
+    from cfvs_maniskill import TASKS
+    from cfvs_maniskill.agents.registry import AGENTS
+    from cfvs_maniskill.objects.library import SelectionError, load_library
+
+    for a in args.agents:
+        if a not in AGENTS:
+            _fail(f"unknown agent '{a}'; valid: {', '.join(AGENTS)}")
+    if args.episodes_per_object < 1:
+        _fail(f"--episodes-per-object must be >= 1, got {args.episodes_per_object}")
+    lib = load_library([str(a) for a in args.assets])
+    out = {}
+    for t in args.tasks:
+        base = t.removesuffix("-v1")
+        if base not in TASKS:
+            _fail(f"unknown task '{t}'; valid: {', '.join(sorted(TASKS))}")
+        try:
+            out[base] = [s.name for s in lib.select(list(args.objects), profile=TASKS[base].peg)]
+        except SelectionError as e:
+            _fail(str(e))
+    return out
+
+
+def main(args: EvalArgs) -> int:
+    from tqdm import tqdm
+
+    from cfvs_maniskill.eval.jobs import make_jobs
+    from cfvs_maniskill.eval.local import BACKENDS
+    from cfvs_maniskill.eval.results import ResultsError, append, read_done
+    from cfvs_maniskill.eval.summary import write_summary
+    from cfvs_maniskill.eval.worker import WorkerConfig
+
+    objects = resolve(args)
+    jobs = make_jobs(
+        objects, list(args.agents), list(args.init_errors), args.episodes_per_object, args.seed
+    )
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / "episodes.jsonl"
+    try:
+        done = read_done(path)
+    except ResultsError as e:
+        _fail(str(e))
+    todo = [j for j in jobs if j.key not in done]
+    print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already in {path}, {len(todo)} to run")
+    cfg = WorkerConfig(
+        objects=objects, assets=[str(a) for a in args.assets], search_radius=args.search_radius
+    )
+    t0 = time.perf_counter()
+    ok = 0
+    bar = tqdm(total=len(todo), unit="ep", desc="eval", file=sys.stderr, smoothing=0.05)
+    try:
+        for rec in BACKENDS[args.backend](todo, args.workers, cfg):
+            append(path, rec)
+            ok += rec["success"]
+            bar.update(1)
+            bar.set_postfix(success=f"{ok}/{bar.n}")
+    except KeyboardInterrupt:
+        bar.close()
+        print(f"interrupted: {bar.n} episodes saved in {path}; run again to finish")
+        return 130
+    bar.close()
+    rate = len(todo) / max(time.perf_counter() - t0, 1e-9)
+    print(f"{len(todo)} episodes in {time.perf_counter() - t0:.0f} s ({rate:.2f} episodes/s)")
+    summary = write_summary(path, args.out / "summary.md", asdict(args))
+    print(summary)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(tyro.cli(EvalArgs)))

@@ -1,0 +1,33 @@
+"""Local backend: a pool of worker processes on this machine (1 = in this process)."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from collections.abc import Callable, Iterator
+
+from cfvs_maniskill.eval.jobs import Job
+from cfvs_maniskill.eval.worker import Worker, WorkerConfig, init_process, run_in_process
+
+
+def run_local(jobs: list[Job], workers: int, cfg: WorkerConfig) -> Iterator[dict]:
+    """Yield result records as episodes finish (in any order)."""
+    if workers <= 1:
+        w = Worker(cfg)
+        try:
+            for job in jobs:
+                yield w.run(job)
+        finally:
+            w.close()
+        return
+    # spawn: a fresh interpreter per worker (SAPIEN and torch do not survive fork well).
+    ctx = mp.get_context("spawn")
+    pool = ctx.Pool(workers, initializer=init_process, initargs=(cfg,), maxtasksperchild=None)
+    try:
+        yield from pool.imap_unordered(run_in_process, jobs, chunksize=1)
+        pool.close()
+    finally:
+        pool.terminate()
+        pool.join()
+
+
+BACKENDS: dict[str, Callable[..., Iterator[dict]]] = {"local": run_local}

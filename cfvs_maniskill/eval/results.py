@@ -1,0 +1,44 @@
+"""The results file: JSON lines, one finished episode each, appended and fsync'd one at a
+time, so any kill loses at most the episode that was running."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+
+class ResultsError(ValueError):
+    """A results file that cannot be resumed; the message names the file and the line."""
+
+
+def read_done(path: Path) -> dict[str, dict]:
+    """Finished records by job key. A torn last line (a kill mid-write: no final newline)
+    is cut off the file and its job runs again; a bad complete line is an error naming it."""
+    if not path.exists():
+        return {}
+    raw = path.read_bytes()
+    end = raw.rfind(b"\n") + 1  # everything after the last newline is torn
+    if end < len(raw):
+        with open(path, "r+b") as f:
+            f.truncate(end)
+    done: dict[str, dict] = {}
+    for i, line in enumerate(raw[:end].split(b"\n")):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+            done[rec["key"]] = rec
+        except (ValueError, KeyError, TypeError) as e:
+            raise ResultsError(
+                f"{path}: line {i + 1} is not a result record ({type(e).__name__}: {e}); "
+                "fix or remove that line to resume"
+            ) from e
+    return done
+
+
+def append(path: Path, record: dict) -> None:
+    with open(path, "a") as f:
+        f.write(json.dumps(record) + "\n")
+        f.flush()
+        os.fsync(f.fileno())

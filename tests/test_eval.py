@@ -20,7 +20,8 @@ ARGS = [
     "--objects", "cuboid_test_1", "cylinder", "--init-errors", "small",
     "--episodes-per-object", "3",
 ]  # fmt: skip
-JOBS = 1 * 2 * 2 * 1 * 3
+EPISODES = 3
+JOBS = 1 * 2 * 2 * 1 * EPISODES
 
 
 def _records(path: Path) -> dict[str, dict]:
@@ -128,3 +129,36 @@ def test_unknown_names_exit_2_listing_valid_ones(tmp_path, flag, value, valid):
     r = run_cli("cfvs_maniskill.eval", flag, value, "--out", str(tmp_path))
     assert r.returncode == 2
     assert value in r.stderr and valid in r.stderr
+
+
+@pytest.mark.slow
+def test_ray_backend_retries_killed_workers_and_records_once(reference):
+    """Local Ray instance, 2 actors; both are killed after the first result (one of them
+    mid-episode): their episodes go to fresh actors and every job is recorded once, with
+    the outcomes of the local run."""
+    ray = pytest.importorskip("ray")
+    from cfvs_maniskill.eval.__main__ import EvalArgs, resolve
+    from cfvs_maniskill.eval.jobs import make_jobs
+    from cfvs_maniskill.eval.ray_backend import ACTOR_PREFIX, run_ray
+    from cfvs_maniskill.eval.worker import WorkerConfig
+
+    args = EvalArgs(
+        tasks=("PegInsert3DoF",), agents=("oracle", "icp"), objects=("cuboid_test_1", "cylinder"),
+        init_errors=("small",), episodes_per_object=EPISODES,
+    )  # fmt: skip  (the same jobs as ARGS)
+    objects = resolve(args)
+    jobs = make_jobs(objects, list(args.agents), ["small"], args.episodes_per_object, 0)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        got = []
+        for rec in run_ray(jobs, 2, WorkerConfig(objects=objects)):
+            got.append(rec)
+            if len(got) == 1:
+                for i in range(2):
+                    ray.kill(ray.get_actor(f"{ACTOR_PREFIX}{i}-0"))
+    finally:
+        ray.shutdown()
+    keys = [r["key"] for r in got]
+    assert len(keys) == len(set(keys)) == JOBS
+    recs = {r["key"]: {k: v for k, v in r.items() if k != "wall_time_s"} for r in got}
+    assert _same_outcomes(recs, reference)

@@ -35,7 +35,10 @@ class EvalArgs:
     """Base seed; each episode's seed is a stable hash of (task, object, error, episode, seed)."""
     workers: int = 2
     """Local worker processes (each reuses one env and one agent across episodes)."""
-    backend: Literal["local"] = "local"
+    backend: Literal["local", "ray"] = "local"
+    """local: worker processes on this machine; ray: one Ray actor per worker."""
+    address: str | None = None
+    """Ray cluster address (HOST:PORT) with --backend ray; none: start a local Ray."""
     assets: tuple[Path, ...] = ()
     """Extra hole-object folders or files."""
     search_radius: float = 0.008
@@ -99,7 +102,7 @@ def main(args: EvalArgs) -> int:
     ok = 0
     bar = tqdm(total=len(todo), unit="ep", desc="eval", file=sys.stderr, smoothing=0.05)
     try:
-        for rec in BACKENDS[args.backend](todo, args.workers, cfg):
+        for rec in BACKENDS[args.backend](todo, args.workers, cfg, address=args.address):
             append(path, rec)
             ok += rec["success"]
             bar.update(1)

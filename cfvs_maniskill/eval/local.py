@@ -9,7 +9,9 @@ from cfvs_maniskill.eval.jobs import Job
 from cfvs_maniskill.eval.worker import Worker, WorkerConfig, init_process, run_in_process
 
 
-def run_local(jobs: list[Job], workers: int, cfg: WorkerConfig) -> Iterator[dict]:
+def run_local(
+    jobs: list[Job], workers: int, cfg: WorkerConfig, address: str | None = None
+) -> Iterator[dict]:
     """Yield result records as episodes finish (in any order)."""
     if workers <= 1:
         w = Worker(cfg)
@@ -30,4 +32,10 @@ def run_local(jobs: list[Job], workers: int, cfg: WorkerConfig) -> Iterator[dict
         pool.join()
 
 
-BACKENDS: dict[str, Callable[..., Iterator[dict]]] = {"local": run_local}
+def _ray(jobs: list[Job], workers: int, cfg: WorkerConfig, address: str | None = None):
+    from cfvs_maniskill.eval.ray_backend import run_ray
+
+    return run_ray(jobs, workers, cfg, address=address)
+
+
+BACKENDS: dict[str, Callable[..., Iterator[dict]]] = {"local": run_local, "ray": _ray}

@@ -1,0 +1,84 @@
+"""Ray backend: the same jobs on a Ray cluster (`--backend ray --address HOST:PORT`, or a
+local Ray instance without an address), one actor per worker.
+
+An actor keeps its env and agents like a local worker. If an actor dies (its node goes
+away, it is killed, it crashes), its episode is given to a fresh actor and recorded once,
+when it finishes; a job that kills `max_retries` actors in a row stops the run with its
+key. Ray is an optional extra: `pip install .[ray]`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+from cfvs_maniskill.eval.jobs import Job
+from cfvs_maniskill.eval.worker import Worker, WorkerConfig
+
+ACTOR_PREFIX = "cfvs-eval-worker-"
+
+
+class _Actor:
+    def __init__(self, cfg: WorkerConfig):
+        self.worker = Worker(cfg)
+
+    def run(self, job: Job) -> dict:
+        return self.worker.run(job)
+
+
+def run_ray(
+    jobs: list[Job],
+    workers: int,
+    cfg: WorkerConfig,
+    address: str | None = None,
+    max_retries: int = 3,
+) -> Iterator[dict]:
+    try:
+        import ray
+    except ImportError as e:
+        raise SystemExit("error: --backend ray needs Ray: pip install '.[ray]'") from e
+    if not ray.is_initialized():
+        if address:
+            ray.init(address=address, log_to_driver=False)
+        else:
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+    Remote = ray.remote(num_cpus=1)(_Actor)
+
+    def spawn(i: int):
+        # Named, so that operators (and the tests) can find and kill one.
+        return Remote.options(name=f"{ACTOR_PREFIX}{i}-{spawn.count}").remote(cfg)
+
+    spawn.count = 0
+    actors = [spawn(i) for i in range(workers)]
+    queue = list(reversed(jobs))
+    pending: dict = {}
+    tries: dict[str, int] = {}
+
+    def submit(i: int) -> None:
+        if queue:
+            job = queue.pop()
+            pending[actors[i].run.remote(job)] = (i, job)
+
+    for i in range(workers):
+        submit(i)
+    try:
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            i, job = pending.pop(ready[0])
+            try:
+                rec = ray.get(ready[0])
+            except ray.exceptions.RayActorError:
+                tries[job.key] = tries.get(job.key, 0) + 1
+                if tries[job.key] >= max_retries:
+                    raise RuntimeError(
+                        f"job {job.key}: {max_retries} workers died running it; stopping"
+                    ) from None
+                spawn.count += 1
+                actors[i] = spawn(i)
+                queue.append(job)  # retried next, on the fresh actor
+                submit(i)
+                continue
+            yield rec
+            submit(i)
+    finally:
+        for a in actors:
+            ray.kill(a)

@@ -143,8 +143,11 @@ def test_ray_backend_retries_killed_workers_and_records_once(reference):
     from cfvs_maniskill.eval.worker import WorkerConfig
 
     args = EvalArgs(
-        tasks=("PegInsert3DoF",), agents=("oracle", "icp"), objects=("cuboid_test_1", "cylinder"),
-        init_errors=("small",), episodes_per_object=EPISODES,
+        tasks=("PegInsert3DoF",),
+        agents=("oracle", "icp"),
+        objects=("cuboid_test_1", "cylinder"),
+        init_errors=("small",),
+        episodes_per_object=EPISODES,
     )  # fmt: skip  (the same jobs as ARGS)
     objects = resolve(args)
     jobs = make_jobs(objects, list(args.agents), ["small"], args.episodes_per_object, 0)

@@ -1,0 +1,94 @@
+"""Markdown tables shaped like the paper's Tables II-IV, ours beside the paper's."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+from cfvs_maniskill.report import paper
+from cfvs_maniskill.stats import wilson_interval
+
+INITS = ("small", "large")
+
+
+def _cell(recs: list[dict]) -> str:
+    if not recs:
+        return "-"
+    k, n = sum(r["success"] for r in recs), len(recs)
+    lo, hi = wilson_interval(k, n)
+    return f"{k / n:.2f} [{lo:.2f}, {hi:.2f}] (n={n})"
+
+
+def _dof(task: str) -> int:
+    return int(task.removeprefix("PegInsert")[0])
+
+
+def table_ii(records: list[dict]) -> str:
+    """Per task: success at 15 / 30 cm per agent, on average and per paper object."""
+    by = defaultdict(list)
+    for r in records:
+        by[(r["task"], r["label"], r["object"], r["init"])].append(r)
+    tasks = sorted({r["task"] for r in records})
+    labels = sorted({r["label"] for r in records})
+    out = []
+    for task in tasks:
+        dof = _dof(task)
+        out += [
+            f"### {task}: success, ours [95% Wilson] / paper (15 cm | 30 cm)",
+            "",
+            "| agent | average 15 cm | paper | average 30 cm | paper | "
+            + " | ".join(paper.OBJECTS)
+            + " |",
+            "|---|---|---|---|---|" + "---|" * len(paper.OBJECTS),
+        ]
+        for label in labels:
+            recs = [r for r in records if r["task"] == task and r["label"] == label]
+            if not recs:
+                continue
+            ref = paper.TABLE_II.get(dof, {}).get(label)
+            avg = [_cell([r for r in recs if r["init"] == i]) for i in INITS]
+            pav = [f"{ref[0][j]:.2f}" if ref else "-" for j in range(2)]
+            objs = []
+            for j, o in enumerate(paper.OBJECTS):
+                mine = [by[(task, label, o, i)] for i in INITS]
+                frac = " / ".join(
+                    f"{sum(r['success'] for r in m) / len(m):.2f}" if m else "-" for m in mine
+                )
+                objs.append(frac + (f" ({ref[j + 1][0]:.2f} / {ref[j + 1][1]:.2f})" if ref else ""))
+            out.append(
+                f"| {label} | {avg[0]} | {pav[0]} | {avg[1]} | {pav[1]} | "
+                + " | ".join(objs)
+                + " |"
+            )
+        out.append("")
+    out.append("Per object: ours 15 / 30 cm (paper's 15 / 30 cm).")
+    return "\n".join(out)
+
+
+def table_iii(records: list[dict]) -> str:
+    """3-DoF servo time of successful episodes, per agent."""
+    out = [
+        "| agent | 15 cm | paper | 30 cm | paper |",
+        "|---|---|---|---|---|",
+    ]
+    labels = sorted({r["label"] for r in records if _dof(r["task"]) == 3})
+    for label in labels:
+        cells = []
+        for i in INITS:
+            t = [
+                r["servo_time_s"]
+                for r in records
+                if _dof(r["task"]) == 3 and r["label"] == label and r["init"] == i and r["success"]
+            ]
+            cells.append(f"{sum(t) / len(t):.1f} s (n={len(t)})" if t else "-")
+        ref = paper.TABLE_III.get(label, ("-", "-"))
+        out.append(f"| {label} | {cells[0]} | {ref[0]} | {cells[1]} | {ref[1]} |")
+    return "\n".join(out)
+
+
+def table_iv(records: list[dict]) -> str:
+    """6-DoF ablation: success over both distances, per CFVS variant."""
+    out = ["| variant | success (6-DoF, 15 + 30 cm) | paper |", "|---|---|---|"]
+    for label, ref in paper.TABLE_IV.items():
+        recs = [r for r in records if _dof(r["task"]) == 6 and r["label"] == label]
+        out.append(f"| {label} | {_cell(recs)} | {ref:.2f} |")
+    return "\n".join(out)

@@ -173,7 +173,9 @@ def test_report_writes_tables_beside_the_paper_and_plots(reference, tmp_path):
     lines = [json.dumps({**r, "wall_time_s": 1.0}) for r in reference.values()]
     (res / "episodes.jsonl").write_text("\n".join(lines) + "\n")
     out = tmp_path / "report"
-    r = run_cli("cfvs_maniskill.report", str(tmp_path / "results"), "--out", str(out))
+    r = run_cli(
+        "cfvs_maniskill.report", str(tmp_path / "results"), "--out", str(out), "--no-videos"
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     text = (out / "README.md").read_text()
     assert "Table II" in text and "Table III" in text and "Table IV" in text
@@ -182,6 +184,37 @@ def test_report_writes_tables_beside_the_paper_and_plots(reference, tmp_path):
     assert "(n=6)" in row and "| 0.10 |" in row
     for name in ("success_per_agent", "success_vs_tilt", "servo_time"):
         assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.slow
+def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
+    import imageio_ffmpeg
+    import numpy as np
+
+    res = tmp_path / "results" / "eval"
+    res.mkdir(parents=True)
+    lines = [json.dumps({**r, "wall_time_s": 1.0}) for r in reference.values()]
+    (res / "episodes.jsonl").write_text("\n".join(lines) + "\n")
+    out = tmp_path / "report"
+    r = run_cli("cfvs_maniskill.report", str(tmp_path / "results"), "--out", str(out))
+    assert r.returncode == 0, r.stderr[-2000:]
+    text = (out / "README.md").read_text()
+    outcomes = {(v["agent"], v["success"]) for v in reference.values()}
+    for agent, success in outcomes:  # first success and first failure of each agent
+        name = f"PegInsert3DoF_{agent}_{'success' if success else 'failure'}.mp4"
+        assert f"(videos/{name})" in text
+        reader = imageio_ffmpeg.read_frames(str(out / "videos" / name))
+        next(reader)  # metadata
+        frames = np.stack([np.frombuffer(f, np.uint8) for f in reader])
+        assert len(frames) > 20 and frames.std() > 1  # a non-blank picture over time
+        replayed = (out / "videos" / name).with_suffix(".txt").read_text()
+        assert replayed.startswith("success" if success else "failure")
+    # a second report keeps the rendered files instead of replaying them again
+    before = {p: p.stat().st_mtime_ns for p in (out / "videos").iterdir()}
+    r = run_cli("cfvs_maniskill.report", str(tmp_path / "results"), "--out", str(out))
+    assert r.returncode == 0 and before == {
+        p: p.stat().st_mtime_ns for p in (out / "videos").iterdir()
+    }
 
 
 def test_report_on_an_empty_folder_exits_2(tmp_path):

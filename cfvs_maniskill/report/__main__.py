@@ -19,10 +19,15 @@ class ReportArgs:
     """Folder searched recursively for *.jsonl result files."""
     out: Path = Path("report")
     """Output folder."""
+    videos: bool = True
+    """Render the first success and first failure per agent and task into OUT/videos
+    (replayed from their records; files already there are kept)."""
+    assets: tuple[Path, ...] = ()
+    """Extra hole-object folders or files the results used (for the video replays)."""
 
 
 def main(args: ReportArgs) -> int:
-    from cfvs_maniskill.report import plots, tables
+    from cfvs_maniskill.report import plots, tables, videos
     from cfvs_maniskill.report.load import load_records
 
     if not args.results.is_dir():
@@ -38,6 +43,11 @@ def main(args: ReportArgs) -> int:
         plots.success_vs_tilt(records, args.out),
         plots.servo_times(records, args.out),
     ]
+    if args.videos:
+        shown = videos.render(videos.pick(records), args.out / "videos", args.assets)
+        video_md = videos.markdown(shown, args.out)
+    else:
+        video_md = "Not rendered (`--no-videos`)."
     text = "\n\n".join(
         [
             f"# Report: {args.results} ({len(records)} episodes)",
@@ -49,6 +59,8 @@ def main(args: ReportArgs) -> int:
             tables.table_iv(records),
             "## Plots",
             "\n".join(f"![{p.stem}]({p.name})" for p in pngs),
+            "## Videos: first success and first failure per agent and task",
+            video_md,
         ]
     )
     (args.out / "README.md").write_text(text + "\n")

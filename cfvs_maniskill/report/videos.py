@@ -1,0 +1,114 @@
+"""Rendered videos for the report: the first success and the first failure of each agent
+on each task, replayed from the result record (episodes are fixed by their seed, object
+and initial error, so a replay in a fresh env shows the recorded episode)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class Video:
+    record: dict
+    path: Path
+    replay_success: bool
+    replay_reason: str
+
+    @property
+    def recorded(self) -> str:
+        return "success" if self.record["success"] else "failure"
+
+
+def pick(records: list[dict]) -> list[dict]:
+    """First success and first failure per (task, agent) in file order. Variants (e.g.
+    results/cfvs_plain, run with other executor settings) are skipped: their settings are
+    not in the record, so a replay could not match."""
+    chosen: dict[tuple, dict] = {}
+    # Runner records first: they carry the exact job (object, error, seed) of the episode.
+    for r in sorted(records, key=lambda r: "key" not in r):
+        if r["label"] != r["agent"]:
+            continue
+        chosen.setdefault((r["task"], r["agent"], bool(r["success"])), r)
+    return [chosen[k] for k in sorted(chosen, key=lambda k: (k[0], k[1], not k[2]))]
+
+
+def video_name(rec: dict) -> str:
+    outcome = "success" if rec["success"] else "failure"
+    return f"{rec['task']}_{rec['agent']}_{outcome}"
+
+
+def render(
+    picks: list[dict], out: Path, assets: tuple[Path, ...] = (), search_radius: float = 0.008
+) -> list[Video]:
+    """Replay each picked episode with an off-screen camera into OUT/<name>.mp4; files
+    already there are kept (a second report run renders nothing again)."""
+    import gymnasium as gym
+    from mani_skill.utils.wrappers.record import RecordEpisode
+    from tqdm import tqdm
+
+    import cfvs_maniskill  # noqa: F401  (render device, task registration)
+    from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
+    from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, make_agent
+    from cfvs_maniskill.episode import run_episode
+
+    out.mkdir(parents=True, exist_ok=True)
+    envs: dict[tuple[str, str], RecordEpisode] = {}
+    objects: dict[str, set[str]] = {}
+    for r in picks:
+        objects.setdefault(r["task"], set()).add(r["object"])
+    videos = []
+    for rec in tqdm(picks, desc="videos", unit="video"):
+        path = out / f"{video_name(rec)}.mp4"
+        meta = path.with_suffix(".txt")
+        if path.is_file() and meta.is_file():
+            ok, _, reason = meta.read_text().partition(" ")
+            videos.append(Video(rec, path, ok == "success", reason.strip()))
+            continue
+        obs_mode = AGENT_OBS_MODES.get(rec["agent"], "pointcloud")
+        key = (rec["task"], obs_mode)
+        if key not in envs:
+            env = gym.make(
+                f"{rec['task']}-v1",
+                obs_mode=obs_mode,
+                objects=sorted(objects[rec["task"]]),
+                assets=[str(a) for a in assets],
+                render_mode="rgb_array",
+            )
+            envs[key] = RecordEpisode(
+                env,
+                output_dir=str(out),
+                save_trajectory=False,
+                save_on_reset=False,
+                video_fps=20,
+            )
+        env = envs[key]
+        u = env.unwrapped
+        u.init_error_m = u.task.init_error[rec["init"]]
+        agent = make_agent(rec["agent"], env)
+        executor = Executor(env, ExecutorConfig(search_radius=search_radius))
+        r = run_episode(env, agent, executor, rec["seed"], options={"object": rec["object"]})
+        env.flush_video(name=path.stem)
+        meta.write_text(f"{'success' if r.success else 'failure'} {r.reason}\n")
+        videos.append(Video(rec, path, r.success, r.reason))
+    for env in envs.values():
+        env.close()
+    return videos
+
+
+def markdown(videos: list[Video], base: Path) -> str:
+    """A table of links, relative to the report folder `base`."""
+    if not videos:
+        return "No episodes to show."
+    lines = [
+        "| task | agent | recorded | object | seed | video | replayed |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for v in videos:
+        r = v.record
+        replay = "success" if v.replay_success else f"failure ({v.replay_reason})"
+        lines.append(
+            f"| {r['task']} | {r['agent']} | {v.recorded} | {r['object']} | {r['seed']} | "
+            f"[{v.path.name}]({v.path.relative_to(base)}) | {replay} |"
+        )
+    return "\n".join(lines)

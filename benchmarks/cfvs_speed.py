@@ -6,18 +6,15 @@ Writes the `cfvs_speed` section of benchmarks/RESULTS.md (other sections are kep
 
 from __future__ import annotations
 
-import platform
 import statistics
-import subprocess
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
 import tyro
 
-RESULTS = Path(__file__).parent / "RESULTS.md"
+from benchmarks.common import Figure, Timer, write_section
 
 
 @dataclass
@@ -30,20 +27,6 @@ class Args:
     """Forward passes per network (median reported)."""
     threads: int = 1
     """torch threads (an eval worker uses 1)."""
-
-
-class Timer:
-    """Wraps a callable and accumulates its wall time."""
-
-    def __init__(self, fn):
-        self.fn, self.total = fn, 0.0
-
-    def __call__(self, *a, **k):
-        t = time.perf_counter()
-        try:
-            return self.fn(*a, **k)
-        finally:
-            self.total += time.perf_counter() - t
 
 
 def forward_ms(model, n_points: int, repeats: int) -> float:
@@ -59,19 +42,9 @@ def forward_ms(model, n_points: int, repeats: int) -> float:
     return 1000 * statistics.median(times)
 
 
-def write_section(name: str, body: str) -> None:
-    text = RESULTS.read_text() if RESULTS.exists() else "# Benchmark results\n"
-    start, end = f"<!-- {name} -->", f"<!-- /{name} -->"
-    block = f"{start}\n{body.rstrip()}\n{end}"
-    if start in text:
-        a, b = text.index(start), text.index(end) + len(end)
-        text = text[:a] + block + text[b:]
-    else:
-        text = text.rstrip() + "\n\n" + block + "\n"
-    RESULTS.write_text(text)
-
-
-def main(args: Args) -> str:
+def measure(args: Args) -> tuple[list[Figure], str]:
+    """OAKN / OPN forward times, and CFVS 6-DoF episodes' wall time against the render +
+    physics time inside those same episodes (the floor any agent pays)."""
     import gymnasium as gym
 
     import cfvs_maniskill  # noqa: F401
@@ -80,7 +53,7 @@ def main(args: Args) -> str:
     from cfvs_maniskill.episode import run_episode
 
     torch.set_num_threads(args.threads)
-    env = gym.make("PegInsert6DoF-v1", obs_mode="pointcloud")
+    env = gym.make("PegInsert6DoF-v1", obs_mode="pointcloud", objects=["test"])
     u = env.unwrapped
     agent = CFVSAgent(env)
     fwd = {
@@ -109,30 +82,42 @@ def main(args: Args) -> str:
         "network (OAKN + OPN)": net,
     }
     parts["other (IK, preprocessing, bookkeeping)"] = wall - sum(parts.values())
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
+    floor = render.total + physics.total
     lines = [
-        "## CFVS speed (`python -m benchmarks.cfvs_speed`)",
-        f"{time.strftime('%Y-%m-%d')}, commit {commit}, {platform.processor() or platform.machine()}, "
-        f"{torch.get_num_threads()} torch thread(s), no GPU (SwiftShader rendering).",
-        "",
-        "| network (B=1, default points) | forward, median |",
-        "|---|---|",
-        *[f"| {k} | {v:.1f} ms |" for k, v in fwd.items()],
-        "",
-        f"{args.episodes} CFVS 6-DoF episodes (seeds 1000-{999 + args.episodes}, test objects): "
-        f"{ok}/{args.episodes} success, mean wall {wall / args.episodes:.2f} s, "
-        f"mean simulated servo time {np.mean(servo):.2f} s.",
+        f"{args.episodes} CFVS 6-DoF episodes (seeds 1000-{999 + args.episodes}, test objects, "
+        f"{args.threads} torch thread): {ok}/{args.episodes} success, mean wall "
+        f"{wall / args.episodes:.2f} s, mean simulated servo time {np.mean(servo):.2f} s, "
+        f"{render.calls / args.episodes:.1f} observations and {physics.calls / args.episodes:.0f}"
+        " control steps per episode.",
         "",
         "| share of the episode wall time | seconds / episode | % |",
         "|---|---|---|",
         *[f"| {k} | {v / args.episodes:.3f} | {100 * v / wall:.0f}% |" for k, v in parts.items()],
     ]
-    body = "\n".join(lines)
+    figures = [
+        Figure(
+            "CFVS 6-DoF episode wall time / its render + physics time",
+            f"{wall / floor:.2f}",
+            "<= 2.0",
+            wall / floor <= 2.0,
+            f"{wall / args.episodes:.2f} s vs {floor / args.episodes:.2f} s per episode",
+        ),
+        *[
+            Figure(
+                f"{k} forward, B=1, default points, 1 thread", f"{v:.1f} ms", "<= 20 ms", v <= 20
+            )
+            for k, v in fwd.items()
+        ],
+    ]
+    return figures, "\n".join(lines)
+
+
+def main(args: Args) -> None:
+    figures, detail = measure(args)
+    body = "\n".join(["## CFVS speed (`python -m benchmarks.cfvs_speed`)", detail, ""]
+                     + [f.row() for f in figures])  # fmt: skip
     write_section("cfvs_speed", body)
     print(body)
-    return body
 
 
 if __name__ == "__main__":

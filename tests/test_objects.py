@@ -101,3 +101,36 @@ def test_mesh_body_goes_through_coacd(tmp_path):
     assert g.visual_trimesh().is_watertight
     assert g.hole_frame[2] == pytest.approx(0.07, abs=1e-4)
     assert len(g.collision_parts) >= 5
+
+
+@pytest.mark.slow
+def test_huge_mesh_is_simplified_with_a_warning_and_cached(tmp_path, caplog, monkeypatch):
+    import logging
+    import time
+
+    import trimesh
+
+    from cfvs_maniskill.objects.build import MAX_BODY_FACES
+
+    monkeypatch.setenv("CFVS_CACHE", str(tmp_path / "cache"))  # a cold cache every run
+    # A scanned-part-sized mesh: a 150 x 120 x 70 mm block with ~786 000 triangles.
+    block = trimesh.creation.box([0.15, 0.12, 0.07])
+    for _ in range(8):
+        block = block.subdivide()
+    assert len(block.faces) > 700_000
+    block.export(tmp_path / "scan.stl")
+    (tmp_path / "scan.yaml").write_text("split: test\nbody:\n  mesh: {file: scan.stl}\n")
+    lib = load_library([tmp_path], include_default=False)
+    assert not lib.errors
+    with caplog.at_level(logging.WARNING):
+        g = build_geometry(lib.specs["scan"], "round")
+    said = " ".join(r.getMessage() for r in caplog.records)
+    assert "scan.yaml" in said and "body.mesh.file" in said and f"{len(block.faces)}" in said
+    assert len(g.visual_faces) < MAX_BODY_FACES
+    assert g.visual_trimesh().is_watertight
+    assert g.hole_frame[2] == pytest.approx(0.07, abs=1e-4)
+    caplog.clear()
+    t = time.perf_counter()
+    again = build_geometry(lib.specs["scan"], "round")  # from the cache: no second pass
+    assert time.perf_counter() - t < 5 and not caplog.records
+    assert np.array_equal(again.visual_faces, g.visual_faces)

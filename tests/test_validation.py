@@ -143,3 +143,15 @@ def test_assets_check_command_prints_a_table(tmp_path):
         assert word in out, out
     r = run_cli("cfvs_maniskill.assets", "check")
     assert r.returncode == 0 and "8 ok, 0 with errors" in r.stdout
+
+
+def test_degenerate_mesh_is_named(tmp_path):
+    import trimesh
+
+    # Closed but flat: a box of zero height has no inside to cut a hole from.
+    trimesh.creation.box([0.1, 0.1, 0.0]).export(tmp_path / "flat.stl")
+    p = _write(tmp_path, "body:\n  mesh: {file: flat.stl}\n", "flat.yaml")
+    with pytest.raises(HoleSpecError) as e:
+        build_geometry(load_spec(p), "round")
+    assert str(p) in str(e.value) and "'body.mesh.file'" in str(e.value)
+    assert "flat.stl" in str(e.value)

@@ -99,11 +99,13 @@ def main(args: EvalArgs) -> int:
         objects=objects, assets=[str(a) for a in args.assets], search_radius=args.search_radius
     )
     t0 = time.perf_counter()
+    t_first = None
     ok = 0
     bar = tqdm(total=len(todo), unit="ep", desc="eval", file=sys.stderr, smoothing=0.05)
     try:
         for rec in BACKENDS[args.backend](todo, args.workers, cfg, address=args.address):
             append(path, rec)
+            t_first = t_first or time.perf_counter()
             ok += rec["success"]
             bar.update(1)
             bar.set_postfix(success=f"{ok}/{bar.n}")
@@ -112,8 +114,13 @@ def main(args: EvalArgs) -> int:
         print(f"interrupted: {bar.n} episodes saved in {path}; run again to finish")
         return 130
     bar.close()
-    rate = len(todo) / max(time.perf_counter() - t0, 1e-9)
-    print(f"{len(todo)} episodes in {time.perf_counter() - t0:.0f} s ({rate:.2f} episodes/s)")
+    wall = time.perf_counter() - t0
+    line = f"{len(todo)} episodes in {wall:.0f} s ({len(todo) / max(wall, 1e-9):.2f} episodes/s"
+    if t_first and len(todo) > 1:
+        # Without the workers' start-up (scene build, shader compile): the steady rate.
+        steady = (len(todo) - 1) / max(time.perf_counter() - t_first, 1e-9)
+        line += f"; {steady:.2f} episodes/s after the first"
+    print(line + ")")
     summary = write_summary(path, args.out / "summary.md", asdict(args))
     print(summary)
     return 0

@@ -44,6 +44,12 @@ BUILD_VERSION = 3
 CYLINDER_SEGMENTS = 96
 """Facets of round bodies and round holes: 1.6 um chord error on a 25 mm hole."""
 COACD_THRESHOLDS = (0.04, 0.02, 0.01)
+MAX_BODY_FACES = 50_000
+"""Mesh bodies with more triangles are simplified first (CoACD and the wrist camera's
+frame time grow with the triangle count; a scanned part can have millions)."""
+SIMPLIFY_TOLERANCE = 0.0002
+"""Largest surface deviation (m) the simplification may make: 0.2 mm, far below the
+clearance; the hole itself is cut afterwards, exactly."""
 """Concavity thresholds tried in turn until no convex part reaches into the hole."""
 HOLE_CHECK_SHRINK = 0.001
 """A part may not overlap the hole volume shrunk by this much (1 mm) on every side."""
@@ -168,6 +174,15 @@ def _load_mesh_body(spec: HoleSpec) -> mf.Manifold:
         raise HoleSpecError(
             spec.source, fld, f"mesh {path} is not a valid closed 2-manifold ({m.status()})"
         )
+    if m.num_tri() > MAX_BODY_FACES:
+        simple = m.simplify(SIMPLIFY_TOLERANCE)
+        log.warning(
+            "%s: %s: mesh %s has %d triangles (> %d); simplified to %d within %.1f mm for "
+            "collision and rendering (the result is cached)",
+            spec.source, fld, path, m.num_tri(), MAX_BODY_FACES, simple.num_tri(),
+            1000 * SIMPLIFY_TOLERANCE,
+        )  # fmt: skip
+        m = simple
     return m
 
 

@@ -1,0 +1,131 @@
+"""Env step speed against ManiSkill's own PegInsertionSide-v1 (state obs, 1 env), and our
+point-cloud observation against the floor: a bare SAPIEN scene with the same camera
+rendering the same meshes (no ManiSkill on top)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from benchmarks.common import Figure, interleaved
+
+
+def step_ratio(steps: int = 100, rounds: int = 6) -> tuple[list[Figure], str]:
+    import gymnasium as gym
+    import mani_skill.envs  # noqa: F401  (registers PegInsertionSide-v1)
+
+    from cfvs_maniskill.rendering import device
+
+    ours = gym.make("PegInsert6DoF-v1", obs_mode="state")
+    ours.reset(seed=0)
+    theirs = gym.make(
+        "PegInsertionSide-v1", obs_mode="state", render_backend=device.render_backend()
+    )
+    theirs.reset(seed=0)
+    u = ours.unwrapped
+    q = u.agent.robot.get_qpos()[0].numpy()
+    hold = np.concatenate([q, np.zeros_like(q)])  # pd_joint_pos_vel: hold the start pose
+    zero = np.zeros(theirs.action_space.shape, dtype=np.float32)  # pd_joint_delta_pos
+
+    def run(env, action):
+        def f():
+            for _ in range(steps):
+                env.step(action)
+
+        return f
+
+    t = interleaved({"ours": run(ours, hold), "theirs": run(theirs, zero)}, rounds)
+    n = steps * rounds
+    ms = {k: 1000 * v / n for k, v in t.items()}
+    sub = {k: e.unwrapped.sim_freq // e.unwrapped.control_freq for k, e in
+           (("ours", ours), ("theirs", theirs))}  # fmt: skip
+    ours.close()
+    theirs.close()
+    ratio = ms["theirs"] / ms["ours"]
+    detail = (
+        f"state obs, 1 env, {n} steps each, interleaved: ours {ms['ours']:.2f} ms/step "
+        f"({sub['ours']} PhysX substeps, UR5 + peg + hole object), PegInsertionSide-v1 "
+        f"{ms['theirs']:.2f} ms/step ({sub['theirs']} substeps, Panda + peg + box)"
+    )
+    fig = Figure(
+        "env step speed: ours / ManiSkill PegInsertionSide-v1 (state obs, 1 env)",
+        f"{ratio:.2f}",
+        ">= 0.8",
+        ratio >= 0.8,
+        f"{ms['ours']:.2f} vs {ms['theirs']:.2f} ms/step",
+    )
+    return [fig], detail
+
+
+def _bare_scene(u):
+    """A plain SAPIEN scene with what our wrist camera sees: the robot (same URDF and
+    joint angles), the table, the current hole object, ManiSkill's default lights, and
+    the same camera (size, fov, near/far, mount pose) on the same link."""
+    import sapien
+
+    from cfvs_maniskill.robots.ur5 import CAMERA_FOV, TOOL_LINK, camera_pose_in_tool
+
+    scene = sapien.Scene(
+        [sapien.physx.PhysxCpuSystem(), sapien.render.RenderSystem(u._render_device)]
+    )
+    scene.set_ambient_light([0.3, 0.3, 0.3])
+    scene.add_directional_light([1, 1, -1], [1, 1, 1])
+    scene.add_directional_light([0, 0, -1], [1, 1, 1])
+    robot = scene.create_urdf_loader().load(str(u.agent.urdf_path))
+    robot.set_qpos(u.agent.robot.get_qpos()[0].numpy())
+    b = scene.create_actor_builder()
+    b.add_box_visual(half_size=[1.0, 1.0, 0.025])
+    b.build_static().set_pose(sapien.Pose(p=[0.3, 0, -0.025]))
+    visual, _ = u.geometries[u.object_index].mesh_files()
+    b = scene.create_actor_builder()
+    b.add_visual_from_file(str(visual))
+    hole = b.build_kinematic()
+    hole.set_pose(u.hole_objects[u.object_index].pose.sp)
+    tool = next(link for link in robot.get_links() if link.name == TOOL_LINK)
+    cam = scene.add_mounted_camera(
+        "floor_camera", tool.entity, camera_pose_in_tool(),
+        u.task.camera_width, u.task.camera_height, CAMERA_FOV, 0.01, 2.0,
+    )  # fmt: skip
+    return scene, cam
+
+
+def pointcloud_floor(rounds: int = 200) -> tuple[list[Figure], str]:
+    import gymnasium as gym
+
+    env = gym.make("PegInsert6DoF-v1", obs_mode="pointcloud")
+    env.reset(seed=0)
+    u = env.unwrapped
+    scene, cam = _bare_scene(u)
+
+    def floor():
+        # The same pictures our observation holds (colour, position + segmentation),
+        # turned into world-frame points: the least any point-cloud obs must do.
+        scene.update_render()
+        cam.take_picture()
+        rgb = cam.get_picture("Color")
+        ps = cam.get_picture("PositionSegmentation")
+        xyz = ps[..., :3].reshape(-1, 3).astype(np.float32) / 1000.0
+        world = xyz @ cam.get_model_matrix()[:3, :3].T + cam.get_model_matrix()[:3, 3]
+        return world, rgb, ps[..., 3]
+
+    def ours():
+        u.get_obs()
+
+    floor(), ours()  # first frames: shader and pipeline set-up
+    t = interleaved({"ours": ours, "floor": floor}, rounds)
+    ms = {k: 1000 * v / rounds for k, v in t.items()}
+    env.close()
+    ratio = ms["ours"] / ms["floor"]
+    w, h = u.task.camera_width, u.task.camera_height
+    detail = (
+        f"{w}x{h} wrist camera, {rounds} observations each, interleaved: our pointcloud "
+        f"obs {ms['ours']:.2f} ms, bare SAPIEN render + read-back + world transform "
+        f"{ms['floor']:.2f} ms"
+    )
+    fig = Figure(
+        "pointcloud obs time: ours / bare SAPIEN scene, same camera and meshes",
+        f"{ratio:.2f}",
+        "<= 1.2",
+        ratio <= 1.2,
+        f"{ms['ours']:.1f} vs {ms['floor']:.1f} ms",
+    )
+    return [fig], detail

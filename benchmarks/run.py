@@ -1,0 +1,75 @@
+"""Every speed figure of issue 9 in one run: `python -m benchmarks.run` (or `make bench`).
+
+Prints the figure table and rewrites benchmarks/RESULTS.md with the machine, date and
+commit. Figures are ratios measured in the same run (these machines are noisy).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass
+
+import tyro
+
+from benchmarks.common import RESULTS, Figure, commit, machine
+
+
+@dataclass
+class BenchArgs:
+    """Measure all benchmark figures and rewrite benchmarks/RESULTS.md."""
+
+    episodes: int = 10
+    """CFVS 6-DoF episodes timed for the render + physics ratio."""
+    servo_episodes: int = 20
+    """CFVS 3-DoF episodes per initial error for the servo time."""
+    eval_per_object: int = 12
+    """Episodes per test object in each eval-throughput run."""
+    ray: bool = True
+    """Include the Ray cluster figure (needs `pip install '.[ray]'`)."""
+
+
+def main(args: BenchArgs) -> int:
+    import cfvs_maniskill  # noqa: F401  (render device, tasks)
+    from benchmarks import cfvs_speed, env_step, eval_scaling, servo_time, startup
+
+    t0 = time.perf_counter()
+    sections: list[tuple[str, str]] = []
+    figures: list[Figure] = []
+
+    def add(title: str, result: tuple[list[Figure], str]) -> None:
+        figs, detail = result
+        figures.extend(figs)
+        sections.append((title, detail))
+        for f in figs:
+            print(f.row(), flush=True)
+
+    add("Env step against ManiSkill", env_step.step_ratio())
+    add("Point-cloud observation against a bare SAPIEN scene", env_step.pointcloud_floor())
+    add("CFVS episode and networks", cfvs_speed.measure(cfvs_speed.Args(episodes=args.episodes)))
+    add("Servo time", servo_time.measure(args.servo_episodes))
+    add(
+        "Evaluation throughput and memory",
+        eval_scaling.measure(args.eval_per_object, ray_nodes=2 if args.ray else 0),
+    )
+    add("Start-up", startup.measure())
+    text = [
+        "# Benchmark results",
+        "",
+        f"`python -m benchmarks.run`: {time.strftime('%Y-%m-%d %H:%M')}, commit {commit()}, "
+        f"{(time.perf_counter() - t0) / 60:.0f} min.",
+        f"Machine: {machine()}.",
+        "",
+        "| figure | measured | target | | note |",
+        "|---|---|---|---|---|",
+        *[f.row() for f in figures],
+    ]
+    for title, detail in sections:
+        text += ["", f"## {title}", "", detail]
+    RESULTS.write_text("\n".join(text) + "\n")
+    print(f"wrote {RESULTS}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(tyro.cli(BenchArgs)))

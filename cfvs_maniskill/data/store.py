@@ -29,6 +29,7 @@ missing indices: N unique samples, never a duplicate.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import shutil
@@ -67,11 +68,23 @@ def write_part(out: Path, first: int, rows: dict[str, np.ndarray]) -> None:
     n = len(rows["sample_index"])
     final = d / f"part-{first:08d}-{n:06d}.npz"
     tmp = d / f".tmp-{first:08d}.npz"
-    with open(tmp, "wb") as f:
-        np.savez(f, **rows)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, final)
+    try:
+        with open(tmp, "wb") as f:
+            np.savez(f, **rows)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, final)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise write_error(tmp, e, f"the {first} samples before it are safe in {d}") from e
+
+
+def write_error(path: Path, e: Exception, kept: str) -> DatasetError:
+    """A failed write (disk full, file-size limit, ...): what failed and what is safe."""
+    return DatasetError(
+        f"{path}: cannot write ({getattr(e, 'strerror', None) or e}); {kept}; "
+        "free some space and run the same command again to resume"
+    )
 
 
 def read_attrs(path: Path) -> dict:
@@ -147,7 +160,26 @@ def finalize(out: Path, attrs: dict) -> int:
             return len(f["sample_index"])
     total = existing_count(out, attrs)
     tmp = out.with_name(out.name + ".tmp")
-    with h5py.File(tmp, "w") as f:
+    # HDF5 builds the file in memory and Python writes it out: a write that fails (disk
+    # full) is then a plain OSError here, not a half-closed HDF5 file that crashes the
+    # interpreter at exit (measured: a segfault when h5py itself hit the limit).
+    image = io.BytesIO()
+    _merge(out, image, attrs, total)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(image.getbuffer())
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise write_error(tmp, e, f"all {total} samples are kept in {parts_dir(out)}") from e
+    os.replace(tmp, out)
+    shutil.rmtree(parts_dir(out), ignore_errors=True)
+    return total
+
+
+def _merge(out: Path, image: io.BytesIO, attrs: dict, total: int) -> None:
+    with h5py.File(image, "w") as f:
         for k, v in attrs.items():
             f.attrs[k] = v
         filled = 0
@@ -172,9 +204,6 @@ def finalize(out: Path, attrs: dict) -> int:
         if not np.array_equal(idx, np.arange(total)):
             raise DatasetError(f"{out}: samples are not 0..{total - 1} exactly once")
         f.flush()
-    os.replace(tmp, out)
-    shutil.rmtree(parts_dir(out), ignore_errors=True)
-    return total
 
 
 def load(path: Path | str, fields: tuple[str, ...] | None = None) -> tuple[dict, dict]:

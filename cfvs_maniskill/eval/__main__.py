@@ -113,6 +113,10 @@ def main(args: EvalArgs) -> int:
         bar.close()
         print(f"interrupted: {bar.n} episodes saved in {path}; run again to finish")
         return 130
+    except ResultsError as e:
+        bar.close()
+        print(f"error: {e}", file=sys.stderr)
+        return 1
     bar.close()
     wall = time.perf_counter() - t0
     line = f"{len(todo)} episodes in {wall:.0f} s ({len(todo) / max(wall, 1e-9):.2f} episodes/s"

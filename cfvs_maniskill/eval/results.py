@@ -38,7 +38,22 @@ def read_done(path: Path) -> dict[str, dict]:
 
 
 def append(path: Path, record: dict) -> None:
-    with open(path, "a") as f:
-        f.write(json.dumps(record) + "\n")
-        f.flush()
-        os.fsync(f.fileno())
+    """Append one record, or leave the file exactly as it was: a failed write (disk full,
+    file-size limit) is cut back off, so the file never holds half a line."""
+    data = (json.dumps(record) + "\n").encode()
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        size = os.fstat(fd).st_size
+        try:
+            view = memoryview(data)
+            while view:  # os.write may write part of it (e.g. up to a size limit)
+                view = view[os.write(fd, view) :]
+            os.fsync(fd)
+        except OSError as e:
+            os.ftruncate(fd, size)
+            raise ResultsError(
+                f"{path}: cannot append a result ({e.strerror or e}); the results already "
+                "there are intact: free some space and run the same command again to resume"
+            ) from e
+    finally:
+        os.close(fd)

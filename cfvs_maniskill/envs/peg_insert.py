@@ -245,6 +245,14 @@ class PegInsertEnv(BaseEnv):
             raise RuntimeError(f"no reachable scene in {MAX_INIT_TRIES} tries for {geom.name}")
         for i, obj in enumerate(self.hole_objects):
             obj.set_pose(G.to_pose(T_obj) if i == idx else sapien.Pose(p=PARK + [0, i, 0]))
+            # Parked objects are out of view, but the renderer would still draw them every
+            # frame: take them out of the render scene (issue 9).
+            for body in obj._objs[0].get_components():
+                if isinstance(body, sapien.render.RenderBodyComponent):
+                    if i == idx and not body.is_enabled:
+                        body.enable()
+                    elif i != idx and body.is_enabled:
+                        body.disable()
         self.object_index, self.hole_pose = idx, H
         qt = torch.as_tensor(q0, dtype=torch.float32)[None]
         self.agent.reset(qt)

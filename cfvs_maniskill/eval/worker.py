@@ -71,6 +71,7 @@ class Worker:
             init_error=job.init_error,
             episode=job.episode,
             agent=job.agent,
+            search_radius_m=self.cfg.search_radius,  # the executor setting: labels variants
             wall_time_s=round(time.perf_counter() - t0, 3),  # incl. any env / agent set-up
         )
         return rec

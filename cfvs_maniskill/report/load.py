@@ -26,7 +26,9 @@ def load_records(root: Path) -> list[dict]:
             except ValueError:
                 continue  # a torn last line of a running evaluation
             label = rec["agent"]
-            if folder and folder.startswith(label + "_"):
+            if rec.get("search_radius_m") == 0:
+                label += "_plain"  # the paper's protocol: no compliant search
+            elif folder and folder.startswith(label + "_"):
                 label = folder  # a variant's folder: results/cfvs_plain, results/3drhd_plain
             rec["label"], rec["init"] = label, init_label(rec)
             out.append(rec)

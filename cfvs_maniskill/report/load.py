@@ -17,6 +17,8 @@ def load_records(root: Path) -> list[dict]:
     that agent, e.g. results/cfvs_plain) and `init` (small / large)."""
     out = []
     for f in sorted(root.rglob("*.jsonl")):
+        if "archive" in f.relative_to(root).parts[:-1]:
+            continue  # earlier measurements kept for the record (other code, settings)
         folder = f.parent.name if f.parent != root else None
         for line in f.read_text().splitlines():
             if not line.strip():

@@ -24,7 +24,7 @@ retraining with CFVS_UPDATE_REFERENCE=1 pytest tests/test_cfvs.py."""
 
 
 def _reference_outputs(coarse: np.ndarray, fine: np.ndarray) -> dict[str, np.ndarray]:
-    files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=True)
+    files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR)
     oakn, _ = load_weights(files["oakn"], "oakn", "square")
     opn, meta = load_weights(files["opn"], ("opnv", "opn"), "square")
     with torch.no_grad():
@@ -70,7 +70,7 @@ def test_shipped_weights_give_pinned_outputs(make_env):
 
 
 def test_bad_weights_files_are_named(tmp_path):
-    files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=True)
+    files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR)
     with pytest.raises(WeightsError, match="not found"):
         load_weights(tmp_path / "nope.pt", "oakn")
     torn = tmp_path / "torn.pt"
@@ -88,6 +88,19 @@ def test_bad_weights_files_are_named(tmp_path):
     torch.save(blob, other)
     with pytest.raises(WeightsError, match="do not fit the oakn architecture"):
         load_weights(other, "oakn")
+
+
+def test_ablation_weights_are_chosen_by_how_they_were_trained():
+    # The shipped square nets were trained without augmentation (chosen on held-out
+    # procedural shapes), so the "with augmentation" ablation is their _aug sibling.
+    shipped = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR)
+    assert weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=False) == shipped
+    aug = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=True)
+    assert aug["oakn"].name == "oakn_aug.pt" and aug["oakn"].is_file()
+    round_noaug = weights_for("PegInsert3DoF", "round", WEIGHTS_DIR, augmentation=False)
+    assert round_noaug["opn"].name == "opn_noaug.pt"
+    with pytest.raises(WeightsError, match="opn_noaug.pt: weights file not found"):
+        load_weights(round_noaug["opn"], ("opnv", "opn"), "round")
 
 
 def test_missing_weights_name_the_file(make_env, tmp_path):

@@ -9,11 +9,13 @@
 
 Ablations of the paper's Table IV are switches: `coarse_to_fine=False` inserts right after
 the coarse move, `confidence_map=False` averages all candidate keypoints uniformly,
-`augmentation=False` loads weights trained without augmentation (`*_noaug.pt`).
+`augmentation=True / False` loads weights trained with / without the paper's augmentation
+(the shipped file if it was trained that way, by its .json; else `*_aug.pt` / `*_noaug.pt`).
 """
 
 from __future__ import annotations
 
+import json
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,8 +48,9 @@ class CFVSConfig:
     """Run the fine OPN loop after the coarse move (ablation: False)."""
     confidence_map: bool = True
     """Weight keypoint candidates by OAKN's confidence (ablation: uniform mean)."""
-    augmentation: bool = True
-    """Use weights trained with augmentation (ablation: the *_noaug.pt files)."""
+    augmentation: bool | None = None
+    """None: the shipped weights. True / False (ablation): weights trained with / without
+    the paper's scaling-and-bending augmentation."""
     max_fine_iterations: int = 8
     """Algorithm 2's repeat limit."""
     tol_translation: float = 0.0015
@@ -59,19 +62,32 @@ class CFVSConfig:
     weights_dir: Path = WEIGHTS_DIR
 
 
-def weights_for(task: str, peg: str, weights_dir: Path, augmentation: bool) -> dict[str, Path]:
+def weights_for(
+    task: str, peg: str, weights_dir: Path, augmentation: bool | None = None
+) -> dict[str, Path]:
     """The OAKN / OPN files for a task: `tasks.yaml` in the weights folder maps task names;
-    tasks it does not list (e.g. new task files) use `<peg>/oakn.pt`, `<peg>/opn.pt`."""
+    tasks it does not list (e.g. new task files) use `<peg>/oakn.pt`, `<peg>/opn.pt`.
+    With `augmentation` set, the file trained that way: the shipped one if its .json says
+    so, else its `_aug` / `_noaug` sibling."""
     table_file = weights_dir / "tasks.yaml"
     table = yaml.safe_load(table_file.read_text()) if table_file.is_file() else {}
     entry = (table or {}).get(task) or {n: f"{peg}/{n}.pt" for n in ("oakn", "opn")}
     out = {}
     for net in ("oakn", "opn"):
         p = weights_dir / entry[net]
-        if not augmentation:
-            p = p.with_name(p.stem + "_noaug.pt")
+        if augmentation is not None and trained_with_augmentation(p) is not augmentation:
+            p = p.with_name(p.stem + ("_aug.pt" if augmentation else "_noaug.pt"))
         out[net] = p
     return out
+
+
+def trained_with_augmentation(weights: Path) -> bool | None:
+    """From the training record beside a weights file (None: no record)."""
+    record = weights.with_suffix(".json")
+    if not record.is_file():
+        return None
+    args = json.loads(record.read_text()).get("train_args", {})
+    return str(args.get("augment", "True")) == "True"
 
 
 class CFVSAgent(Agent):

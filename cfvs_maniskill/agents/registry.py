@@ -52,6 +52,7 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs_no_c2f": _cfvs(coarse_to_fine=False),
     "cfvs_no_map": _cfvs(confidence_map=False),
     "cfvs_no_aug": _cfvs(augmentation=False),
+    "cfvs_aug": _cfvs(augmentation=True),
     # The paper's baselines (Table II).
     "icp": _icp("workspace"),
     "icp_kpts": _icp("oakn"),

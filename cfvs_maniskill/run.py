@@ -24,8 +24,9 @@ class RunArgs:
     task: str = "PegInsert6DoF"
     """Task name or env id (a file in tasks/), e.g. PegInsert3DoF or PegInsert6DoF-v1."""
     agent: str = "cfvs"
-    """Policy: cfvs (shipped weights), cfvs_no_c2f / cfvs_no_map / cfvs_no_aug (the paper's
-    ablations), oracle (reads the true hole pose)."""
+    """Policy: cfvs (shipped weights), cfvs_no_c2f / cfvs_no_map / cfvs_no_aug / cfvs_aug
+    (the paper's ablations), icp / icp_kpts / 3drhd / kovis (its baselines), oracle (reads
+    the true hole pose)."""
     episodes: int = 10
     """Number of episodes."""
     seed: int = 0

@@ -167,15 +167,19 @@ def test_ray_backend_retries_killed_workers_and_records_once(reference):
     assert _same_outcomes(recs, reference)
 
 
-def test_report_writes_tables_beside_the_paper_and_plots(reference, tmp_path):
+def _results_folder(reference: dict[str, dict], tmp_path: Path) -> Path:
+    """tmp/results/eval/episodes.jsonl holding the reference run's records."""
     res = tmp_path / "results" / "eval"
     res.mkdir(parents=True)
     lines = [json.dumps({**r, "wall_time_s": 1.0}) for r in reference.values()]
     (res / "episodes.jsonl").write_text("\n".join(lines) + "\n")
+    return tmp_path / "results"
+
+
+def test_report_writes_tables_beside_the_paper_and_plots(reference, tmp_path):
+    results = _results_folder(reference, tmp_path)
     out = tmp_path / "report"
-    r = run_cli(
-        "cfvs_maniskill.report", str(tmp_path / "results"), "--out", str(out), "--no-videos"
-    )
+    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--no-videos")
     assert r.returncode == 0, r.stderr[-2000:]
     text = (out / "README.md").read_text()
     assert "Table II" in text and "Table III" in text and "Table IV" in text
@@ -191,12 +195,9 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
     import imageio_ffmpeg
     import numpy as np
 
-    res = tmp_path / "results" / "eval"
-    res.mkdir(parents=True)
-    lines = [json.dumps({**r, "wall_time_s": 1.0}) for r in reference.values()]
-    (res / "episodes.jsonl").write_text("\n".join(lines) + "\n")
+    results = _results_folder(reference, tmp_path)
     out = tmp_path / "report"
-    r = run_cli("cfvs_maniskill.report", str(tmp_path / "results"), "--out", str(out))
+    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out))
     assert r.returncode == 0, r.stderr[-2000:]
     text = (out / "README.md").read_text()
     outcomes = {(v["agent"], v["success"]) for v in reference.values()}
@@ -211,7 +212,7 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
         assert replayed.startswith("success" if success else "failure")
     # a second report keeps the rendered files instead of replaying them again
     before = {p: p.stat().st_mtime_ns for p in (out / "videos").iterdir()}
-    r = run_cli("cfvs_maniskill.report", str(tmp_path / "results"), "--out", str(out))
+    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out))
     assert r.returncode == 0 and before == {
         p: p.stat().st_mtime_ns for p in (out / "videos").iterdir()
     }

@@ -121,7 +121,7 @@ def measure(per_object: int = 12, ray_nodes: int = 2) -> tuple[list[Figure], str
             f"Ray {ray_nodes} workers / 1 worker, local {ray_nodes}-node cluster",
             f"{k:.2f}",
             f">= {0.8 * ray_nodes:.1f} where cores allow",
-            (k >= 0.8 * ray_nodes) if allow else None,
+            met if met or allow else None,
             note,
         )  # fmt: skip
     )

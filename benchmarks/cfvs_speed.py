@@ -1,8 +1,6 @@
 """CFVS speed on this CPU: network forward passes and a 6-DoF episode's wall time split
-into render / physics / network / other. `python -m benchmarks.cfvs_speed`.
-
-Writes the `cfvs_speed` section of benchmarks/RESULTS.md (other sections are kept).
-"""
+into render / physics / network / other. Part of `python -m benchmarks.run`; alone,
+`python -m benchmarks.cfvs_speed` prints its figures (RESULTS.md is written by run.py)."""
 
 from __future__ import annotations
 
@@ -14,7 +12,7 @@ import numpy as np
 import torch
 import tyro
 
-from benchmarks.common import Figure, Timer, write_section
+from benchmarks.common import Figure, Timer
 
 
 @dataclass
@@ -114,10 +112,7 @@ def measure(args: Args) -> tuple[list[Figure], str]:
 
 def main(args: Args) -> None:
     figures, detail = measure(args)
-    body = "\n".join(["## CFVS speed (`python -m benchmarks.cfvs_speed`)", detail, ""]
-                     + [f.row() for f in figures])  # fmt: skip
-    write_section("cfvs_speed", body)
-    print(body)
+    print("\n".join([detail, "", *[f.row() for f in figures]]))
 
 
 if __name__ == "__main__":

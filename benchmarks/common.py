@@ -1,5 +1,5 @@
-"""Shared pieces of the benchmarks: a figure record, an accumulating timer, the results
-file writer and the machine line."""
+"""Shared pieces of the benchmarks: a figure record, an accumulating timer, interleaved
+timing, and the commit and machine lines."""
 
 from __future__ import annotations
 
@@ -79,16 +79,3 @@ def machine() -> str:
         f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB, no GPU (SwiftShader Vulkan), "
         f"Python {platform.python_version()}, torch {torch.__version__}"
     )
-
-
-def write_section(name: str, body: str) -> None:
-    """Replace (or append) the `<!-- name -->` block of RESULTS.md, keeping the others."""
-    text = RESULTS.read_text() if RESULTS.exists() else "# Benchmark results\n"
-    start, end = f"<!-- {name} -->", f"<!-- /{name} -->"
-    block = f"{start}\n{body.rstrip()}\n{end}"
-    if start in text:
-        a, b = text.index(start), text.index(end) + len(end)
-        text = text[:a] + block + text[b:]
-    else:
-        text = text.rstrip() + "\n\n" + block + "\n"
-    RESULTS.write_text(text)

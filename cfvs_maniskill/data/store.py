@@ -179,6 +179,7 @@ def finalize(out: Path, attrs: dict) -> int:
 
 
 def _merge(out: Path, image: io.BytesIO, attrs: dict, total: int) -> None:
+    """The HDF5 file of the old file's and the chunks' samples, built in `image`."""
     with h5py.File(image, "w") as f:
         for k, v in attrs.items():
             f.attrs[k] = v

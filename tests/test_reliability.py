@@ -127,8 +127,9 @@ def test_eval_killed_ten_times_at_random_points_has_every_job_once(eval_referenc
     while kills < 10:
         with open(log, "w") as out:
             proc = subprocess.Popen(
-                cmd, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
-            )
+                cmd, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+                preexec_fn=_sigint_default,
+            )  # fmt: skip
         # A random point: after 0-3 more finished episodes (0: during start-up), plus a
         # random fraction of the next one, whatever this machine's speed.
         target, deadline = lines() + rng.randint(0, 3), time.time() + 120
@@ -150,6 +151,12 @@ def test_eval_killed_ten_times_at_random_points_has_every_job_once(eval_referenc
     assert r.returncode == 0, r.stderr[-2000:]
     got = _records(results)
     assert _outcomes(got) == _outcomes(eval_reference)
+
+
+def _sigint_default() -> None:
+    """A shell that runs the tests in the background (`cmd &`) makes its children ignore
+    SIGINT, and Python keeps an inherited SIG_IGN: give the evaluation Ctrl-C back."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _limit_file_size(limit: int):

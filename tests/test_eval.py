@@ -167,6 +167,30 @@ def test_ray_backend_retries_killed_workers_and_records_once(reference):
     assert _same_outcomes(recs, reference)
 
 
+@pytest.mark.slow
+def test_ray_backend_on_a_two_node_cluster(reference, tmp_path):
+    """`--backend ray --address` on a two-node `ray.cluster_utils.Cluster` with one CPU
+    per node: the two actors can only run on different nodes, so finishing at all shows
+    both nodes worked; the records are the local run's."""
+    pytest.importorskip("ray")
+    from ray.cluster_utils import Cluster
+
+    node = {"num_cpus": 1, "object_store_memory": 80 * 2**20}
+    cluster = Cluster(initialize_head=True, head_node_args=node)
+    cluster.add_node(**node)
+    args = [a for a in ARGS if a != "icp"]  # oracle only: quick episodes
+    try:
+        r = run_cli(
+            "cfvs_maniskill.eval", *args, "--backend", "ray", "--address", cluster.address,
+            "--workers", "2", "--out", str(tmp_path),
+        )  # fmt: skip
+    finally:
+        cluster.shutdown()
+    assert r.returncode == 0, r.stderr[-2000:]
+    want = {k: v for k, v in reference.items() if v["agent"] == "oracle"}
+    assert _same_outcomes(_records(tmp_path / "episodes.jsonl"), want)
+
+
 def _results_folder(reference: dict[str, dict], tmp_path: Path) -> Path:
     """tmp/results/eval/episodes.jsonl holding the reference run's records."""
     res = tmp_path / "results" / "eval"

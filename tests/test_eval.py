@@ -220,10 +220,16 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
     import numpy as np
 
     results = _results_folder(reference, tmp_path)
+    # An episode of an agent whose weights are missing here: listed, not rendered.
+    odd = {**next(iter(reference.values())), "agent": "cfvs_no_aug", "key": "odd"}
+    with open(results / "eval" / "episodes.jsonl", "a") as f:
+        f.write(json.dumps(odd) + "\n")
     out = tmp_path / "report"
     r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out))
     assert r.returncode == 0, r.stderr[-2000:]
     text = (out / "README.md").read_text()
+    row = next(x for x in text.splitlines() if x.startswith("| PegInsert3DoF | cfvs_no_aug |"))
+    assert "not rendered" in row and "round/oakn_noaug.pt" in row
     outcomes = {(v["agent"], v["success"]) for v in reference.values()}
     for agent, success in outcomes:  # first success and first failure of each agent
         name = f"PegInsert3DoF_{agent}_{'success' if success else 'failure'}.mp4"

@@ -11,7 +11,8 @@ from pathlib import Path
 @dataclass
 class Video:
     record: dict
-    path: Path
+    path: Path | None
+    """None: the episode could not be replayed (the reason says why)."""
     replay_success: bool
     replay_reason: str
 
@@ -21,21 +22,21 @@ class Video:
 
 
 def pick(records: list[dict]) -> list[dict]:
-    """First success and first failure per (task, agent) in file order. Variants (e.g.
-    results/cfvs_plain, run with other executor settings) are skipped: their settings are
-    not in the record, so a replay could not match."""
+    """First success and first failure per (task, label) in file order. Variants named
+    only by their folder (e.g. results/cfvs_plain from the run command) are skipped: their
+    executor settings are not in the record, so a replay could not match."""
     chosen: dict[tuple, dict] = {}
     # Runner records first: they carry the exact job (object, error, seed) of the episode.
     for r in sorted(records, key=lambda r: "key" not in r):
-        if r["label"] != r["agent"]:
+        if r["label"] != r["agent"] and "search_radius_m" not in r:
             continue
-        chosen.setdefault((r["task"], r["agent"], bool(r["success"])), r)
+        chosen.setdefault((r["task"], r["label"], bool(r["success"])), r)
     return [chosen[k] for k in sorted(chosen, key=lambda k: (k[0], k[1], not k[2]))]
 
 
 def video_name(rec: dict) -> str:
     outcome = "success" if rec["success"] else "failure"
-    return f"{rec['task']}_{rec['agent']}_{outcome}"
+    return f"{rec['task']}_{rec['label']}_{outcome}"
 
 
 def render(
@@ -85,9 +86,17 @@ def render(
         env = envs[key]
         u = env.unwrapped
         u.init_error_m = u.task.init_error[rec["init"]]
-        agent = make_agent(rec["agent"], env)
-        executor = Executor(env, ExecutorConfig(search_radius=search_radius))
-        r = run_episode(env, agent, executor, rec["seed"], options={"object": rec["object"]})
+        radius = rec.get("search_radius_m", search_radius)
+        try:
+            agent = make_agent(rec["agent"], env)
+            executor = Executor(env, ExecutorConfig(search_radius=radius))
+            options = {"object": rec["object"]}
+            r = run_episode(env, agent, executor, rec["seed"], options=options)
+        except Exception as e:  # e.g. missing weights, an object this env lacks
+            tqdm.write(f"{path.stem}: not rendered: {e}")
+            env.flush_video(save=False)
+            videos.append(Video(rec, None, False, f"not rendered: {e}"))
+            continue
         env.flush_video(name=path.stem)
         meta.write_text(f"{'success' if r.success else 'failure'} {r.reason}\n")
         videos.append(Video(rec, path, r.success, r.reason))
@@ -106,9 +115,13 @@ def markdown(videos: list[Video], base: Path) -> str:
     ]
     for v in videos:
         r = v.record
-        replay = "success" if v.replay_success else f"failure ({v.replay_reason})"
+        if v.path is None:
+            link, replay = "-", v.replay_reason
+        else:
+            link = f"[{v.path.name}]({v.path.relative_to(base)})"
+            replay = "success" if v.replay_success else f"failure ({v.replay_reason})"
         lines.append(
-            f"| {r['task']} | {r['agent']} | {v.recorded} | {r['object']} | {r['seed']} | "
-            f"[{v.path.name}]({v.path.relative_to(base)}) | {replay} |"
+            f"| {r['task']} | {r['label']} | {v.recorded} | {r['object']} | {r['seed']} | "
+            f"{link} | {replay} |"
         )
     return "\n".join(lines)

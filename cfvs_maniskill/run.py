@@ -7,8 +7,6 @@ per episode, rendered off-screen (no display, no GPU needed).
 
 from __future__ import annotations
 
-import json
-import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,6 +67,7 @@ def main(args: RunArgs) -> list:
     from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
     from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, AGENTS, make_agent
     from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.eval.results import ResultsError, append
     from cfvs_maniskill.objects.library import SelectionError
     from cfvs_maniskill.stats import wilson_interval
 
@@ -123,10 +122,10 @@ def main(args: RunArgs) -> list:
         )
         tqdm.write(line)
         if args.out:
-            with open(args.out, "a") as f:
-                f.write(json.dumps(r.to_json()) + "\n")
-                f.flush()
-                os.fsync(f.fileno())
+            try:
+                append(args.out, r.to_json())  # the eval runner's all-or-nothing append
+            except ResultsError as e:
+                _fail(str(e))
         bar.set_postfix(success=f"{sum(x.success for x in results)}/{len(results)}")
     env.close()
     k, n = sum(r.success for r in results), len(results)

@@ -13,6 +13,13 @@ import numpy as np  # noqa: E402
 from cfvs_maniskill.stats import wilson_interval  # noqa: E402
 
 
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def success_per_agent(records: list[dict], out: Path) -> Path:
     tasks = sorted({r["task"] for r in records})
     labels = sorted({r["label"] for r in records})
@@ -33,11 +40,7 @@ def success_per_agent(records: list[dict], out: Path) -> Path:
     ax.set_ylabel("success (95% Wilson)")
     ax.set_ylim(0, 1.05)
     ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    path = out / "success_per_agent.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, out / "success_per_agent.png")
 
 
 def success_vs_tilt(records: list[dict], out: Path) -> Path:
@@ -55,11 +58,7 @@ def success_vs_tilt(records: list[dict], out: Path) -> Path:
     ax.set_ylim(0, 1.05)
     ax.set_title("6-DoF: success vs tilt")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    path = out / "success_vs_tilt.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, out / "success_vs_tilt.png")
 
 
 def servo_times(records: list[dict], out: Path) -> Path:
@@ -71,8 +70,4 @@ def servo_times(records: list[dict], out: Path) -> Path:
     ax.boxplot([d if d else [np.nan] for d in data], tick_labels=labels)
     ax.set_ylabel("simulated servo time of successes (s)")
     ax.tick_params(axis="x", labelrotation=45)
-    fig.tight_layout()
-    path = out / "servo_time.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, out / "servo_time.png")

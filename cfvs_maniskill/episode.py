@@ -41,6 +41,9 @@ def failure_reason(m: dict, depth: float) -> str:
     if m["tilt_error_deg"] > 10:
         return f"peg tilted {m['tilt_error_deg']:.1f} deg from the hole axis"
     if m["tip_depth"] < 0.005:
+        if m["tip_depth"] > 0.001 and m["lateral_offset"] < 0.003:
+            # In the opening, not on the rim: the full section did not follow (tilt, yaw).
+            return f"peg stuck {1000 * m['tip_depth']:.1f} mm into the hole's entry"
         if m["lateral_offset"] < 0.06:
             return f"peg stopped on the rim ({1000 * m['lateral_offset']:.1f} mm off the axis)"
         return f"peg missed the hole ({1000 * m['lateral_offset']:.0f} mm off the axis)"

@@ -107,7 +107,7 @@ class PegInsertEnv(BaseEnv):
         self._noise_gen = torch.Generator().manual_seed(0)
         super().__init__(
             *args,
-            robot_uids=robot_uids or robot_uid_for(cfg.peg),
+            robot_uids=robot_uids or robot_uid_for(cfg.peg, cfg.peg_chamfer),
             render_backend=render_backend or device.render_backend(),
             **kwargs,
         )
@@ -172,6 +172,28 @@ class PegInsertEnv(BaseEnv):
     def tcp_matrix(self) -> np.ndarray:
         """True world pose of the peg tip frame (z along the peg, out of the flange)."""
         return G.to_matrix(self.agent.tcp.pose.sp)
+
+    def peg_wrench(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What a wrist force/torque sensor would read of the peg's contacts, last physics
+        step: world-frame force (N) on the peg, its moment (N m) about the tip, and the
+        moment of the force's components across the peg axis only (the walls' push; the
+        axial part's moment depends on which rim point carries it, so it says little)."""
+        T = self.tcp_matrix()
+        tip, z = T[:3, 3], T[:3, 2]
+        force, moment, side_moment = np.zeros(3), np.zeros(3), np.zeros(3)
+        peg = self.agent.robot.links_map["peg"]._objs[0].entity
+        rate = self.sim_freq  # PhysX reports impulses over one physics step
+        for c in self.scene.px.get_contacts():
+            sign = 1.0 if c.bodies[0].entity == peg else -1.0 if c.bodies[1].entity == peg else 0
+            if sign == 0:
+                continue
+            for point in c.points:  # the impulse acts on the contact's first body
+                f = sign * rate * np.asarray(point.impulse, np.float64)
+                r = np.asarray(point.position, np.float64) - tip
+                force += f
+                moment += np.cross(r, f)
+                side_moment += np.cross(r, f - (f @ z) * z)
+        return force, moment, side_moment
 
     def ik(self, T: np.ndarray, seed: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
         """Joint positions putting the tcp at world pose T (the robot base is the world)."""

@@ -8,7 +8,13 @@ from typing import Any
 
 import yaml
 
-from cfvs_maniskill.constants import DEFAULT_CLEARANCE, DEFAULT_HOLE_DEPTH, PEG_PROFILES, TASKS_DIR
+from cfvs_maniskill.constants import (
+    DEFAULT_CLEARANCE,
+    DEFAULT_HOLE_DEPTH,
+    PEG_PROFILES,
+    TASKS_DIR,
+    peg_half_extent,
+)
 
 
 class TaskConfigError(ValueError):
@@ -29,6 +35,10 @@ class TaskConfig:
     vertical, 6 = full pose). 3 / 4-DoF holes are upright, so agents keep the peg vertical."""
     clearance: float = DEFAULT_CLEARANCE
     """Hole minus peg width (diametral), metres."""
+    peg_chamfer: float = 0.0
+    """45-degree chamfer on the peg's tip edges, metres (0: the paper's sharp-edged peg).
+    Tight fits use one, as real parts do: the tip then starts into the hole with that much
+    more lateral / yaw error and the chamfer guides it in."""
     hole_depth: float = DEFAULT_HOLE_DEPTH
     """Depth of the hole, metres."""
     objects: tuple[str, ...] = ("test",)
@@ -84,6 +94,10 @@ def load_task(path: Path) -> TaskConfig:
             ):
                 raise TaskConfigError(path, k, f"expected [min, max], got {v!r}")
             v = (float(v[0]), float(v[1]))
+        elif known[k].type in ("float", "int") and (
+            isinstance(v, bool) or not isinstance(v, int | float)
+        ):
+            raise TaskConfigError(path, k, f"expected a number, got {v!r}")
         elif k == "objects":
             v = tuple([v] if isinstance(v, str) else v)
         elif k == "init_error":
@@ -98,6 +112,13 @@ def load_task(path: Path) -> TaskConfig:
         raise TaskConfigError(path, "dof", f"expected 3, 4 or 6, got {cfg.dof!r}")
     if cfg.peg not in PEG_PROFILES:
         raise TaskConfigError(path, "peg", f"expected one of {PEG_PROFILES}, got {cfg.peg!r}")
+    if not (0 <= cfg.peg_chamfer <= 0.25 * peg_half_extent(cfg.peg)):
+        raise TaskConfigError(
+            path,
+            "peg_chamfer",
+            f"expected 0 <= peg_chamfer <= {0.25 * peg_half_extent(cfg.peg):.4f} m "
+            f"(a quarter of the peg's half width), got {cfg.peg_chamfer}",
+        )
     if not (0 < cfg.clearance < 0.02):
         raise TaskConfigError(
             path, "clearance", f"expected 0 < clearance < 0.02 m, got {cfg.clearance}"

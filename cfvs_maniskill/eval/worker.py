@@ -72,6 +72,7 @@ class Worker:
             episode=job.episode,
             agent=job.agent,
             search_radius_m=self.cfg.search_radius,  # the executor setting: labels variants
+            insertion=executor.insertion_mode,  # position (paper) or force-guided
             wall_time_s=round(time.perf_counter() - t0, 3),  # incl. any env / agent set-up
         )
         return rec

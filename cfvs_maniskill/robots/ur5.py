@@ -6,7 +6,9 @@ import we write a derived URDF into the cache folder:
     because rendering cost is set by the triangles in view (the .dae visuals are ~50x more);
   * the stock 1 cm `ee_link` collision box removed (it would touch the peg);
   * `tool0` (already in the URDF): the flange frame, +z along the tool axis;
-  * `peg`: a 100 mm round or square peg along tool0's +z (sizes from `constants`);
+  * `peg`: a 100 mm round or square peg along tool0's +z (sizes from `constants`), its tip
+    edges optionally chamfered at 45 deg (tight-fit tasks; a convex mesh written beside the
+    URDF, which PhysX uses as one convex hull);
   * `tcp`: the peg's tip, same axes as tool0. Poses the executor commands are tcp poses.
 
 Self-collision: every link pair of the arm is filtered (ManiSkill's `disable_self_collisions`),
@@ -29,13 +31,14 @@ from pathlib import Path
 
 import numpy as np
 import sapien
+import trimesh
 from mani_skill.agents.base_agent import BaseAgent, Keyframe
 from mani_skill.agents.controllers import (
     PDJointPosControllerConfig,
     PDJointPosVelControllerConfig,
     deepcopy_dict,
 )
-from mani_skill.agents.registration import register_agent
+from mani_skill.agents.registration import REGISTERED_AGENTS, register_agent
 from mani_skill.sensors.camera import CameraConfig
 from scipy.spatial.transform import Rotation
 
@@ -116,8 +119,29 @@ def _fixed(name: str, parent: str, child: str, xyz: str, rpy: str) -> ET.Element
     return j
 
 
-def build_urdf(profile: str) -> str:
-    """Text of the UR5 + peg URDF for a peg `profile` ("round" or "square")."""
+def chamfered_peg_mesh(profile: str, chamfer: float) -> trimesh.Trimesh:
+    """The peg as a convex solid in tool0 coordinates (flange at z = 0, tip at z = PEG_LENGTH)
+    with its tip edges cut at 45 deg by `chamfer` metres: the tip face is 2 x chamfer narrower,
+    so it starts into a tight hole with that much more lateral / yaw error, and the chamfer
+    then slides on the hole's edge and centres the peg (design for assembly)."""
+    L = PEG_LENGTH
+    if profile == "round":
+        a = np.linspace(0, 2 * np.pi, 128, endpoint=False)
+        # Circumscribe the true circle at the full radius: the polygon's flats then sit
+        # 0.0075 mm inside it, negligible against any clearance a task file accepts.
+        ring = np.stack([np.cos(a), np.sin(a)], 1) * ROUND_PEG_RADIUS / np.cos(np.pi / 128)
+        rings = [(ring, 0.0), (ring, L - chamfer), (ring * (1 - chamfer / ROUND_PEG_RADIUS), L)]
+    else:
+        h = SQUARE_PEG_SIDE / 2
+        sq = np.array([[h, h], [-h, h], [-h, -h], [h, -h]])
+        rings = [(sq, 0.0), (sq, L - chamfer), (sq * (h - chamfer) / h, L)]
+    pts = np.concatenate([np.c_[xy, np.full(len(xy), z)] for xy, z in rings])
+    return trimesh.convex.convex_hull(pts)
+
+
+def build_urdf(profile: str, chamfer: float = 0.0, mesh_file: str = "") -> str:
+    """Text of the UR5 + peg URDF for a peg `profile` ("round" or "square"); with `chamfer`
+    > 0 the peg is the convex mesh at `mesh_file` (see `chamfered_peg_mesh`)."""
     src = _ur5_dir()
     tree = ET.parse(src / "urdf" / "ur5_robot.urdf")
     robot = tree.getroot()
@@ -140,36 +164,52 @@ def build_urdf(profile: str) -> str:
         mesh.set("filename", str(src / fn.split("ur_description/", 1)[1]))
 
     geom = ET.Element("geometry")
-    if profile == "round":
+    peg_z = PEG_LENGTH / 2
+    if chamfer > 0:
+        ET.SubElement(geom, "mesh", filename=mesh_file)
+        peg_z = 0.0  # the mesh is already in tool0 coordinates
+    elif profile == "round":
         ET.SubElement(geom, "cylinder", radius=f"{ROUND_PEG_RADIUS}", length=f"{PEG_LENGTH}")
     else:
         s = SQUARE_PEG_SIDE
         ET.SubElement(geom, "box", size=f"{s} {s} {PEG_LENGTH}")
     # The URDF's own tool0 is the flange frame with +z out of the flange (ROS-I convention).
     robot.append(_fixed("peg_joint", TOOL_LINK, "peg", "0 0 0", "0 0 0"))
-    robot.append(_link("peg", geom, PEG_LENGTH / 2, 0.3))
+    robot.append(_link("peg", geom, peg_z, 0.3))
     robot.append(_fixed("tcp_joint", TOOL_LINK, TCP_LINK, f"0 0 {PEG_LENGTH}", "0 0 0"))
     robot.append(_link(TCP_LINK, None, 0.0, 0.01))
     robot.set("name", f"ur5_peg_{profile}")
     return ET.tostring(robot, encoding="unicode")
 
 
-def urdf_path(profile: str) -> str:
-    """Write (once) and return the derived URDF for `profile` in the cache folder."""
-    text = build_urdf(profile)
-    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
-    root = Path(os.environ.get("CFVS_CACHE", Path.home() / ".cache" / "cfvs_maniskill"))
-    path = root / "robots" / f"ur5_peg_{profile}_{digest}.urdf"
+def _write_once(path: Path, data: bytes) -> None:
+    """Atomic write: parallel workers building the same file never read half of it."""
     if not path.is_file():
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(text)
+        tmp.write_bytes(data)
         tmp.replace(path)
+
+
+def urdf_path(profile: str, chamfer: float = 0.0) -> str:
+    """Write (once) and return the derived URDF for `profile` in the cache folder."""
+    root = Path(os.environ.get("CFVS_CACHE", Path.home() / ".cache" / "cfvs_maniskill"))
+    mesh_file = ""
+    if chamfer > 0:
+        data = chamfered_peg_mesh(profile, chamfer).export(file_type="stl")
+        mesh = root / "robots" / f"peg_{profile}_{hashlib.sha256(data).hexdigest()[:12]}.stl"
+        _write_once(mesh, data)
+        mesh_file = str(mesh)
+    text = build_urdf(profile, chamfer, mesh_file)
+    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
+    path = root / "robots" / f"ur5_peg_{profile}_{digest}.urdf"
+    _write_once(path, text.encode())
     return str(path)
 
 
 class _UR5Peg(BaseAgent):
     peg_profile = "square"
+    peg_chamfer = 0.0
     disable_self_collisions = True
     keyframes = dict(home=Keyframe(qpos=HOME_QPOS, pose=sapien.Pose()))
     camera_width = 128
@@ -237,5 +277,18 @@ class UR5RoundPeg(_UR5Peg):
     urdf_path = urdf_path("round")
 
 
-def robot_uid_for(profile: str) -> str:
-    return {"square": UR5SquarePeg.uid, "round": UR5RoundPeg.uid}[profile]
+def robot_uid_for(profile: str, chamfer: float = 0.0) -> str:
+    """The registered robot carrying a `profile` peg; a chamfered peg's robot is made and
+    registered on first use (one per chamfer size, named by it in micrometres)."""
+    base = {"square": UR5SquarePeg, "round": UR5RoundPeg}[profile]
+    if chamfer <= 0:
+        return base.uid
+    uid = f"{base.uid}_chamfer{round(chamfer * 1e6)}um"
+    if uid not in REGISTERED_AGENTS:
+        cls = type(
+            f"{base.__name__}Chamfer{round(chamfer * 1e6)}um",
+            (base,),
+            {"uid": uid, "urdf_path": urdf_path(profile, chamfer), "peg_chamfer": chamfer},
+        )
+        register_agent()(cls)
+    return uid

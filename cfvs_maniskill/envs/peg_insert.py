@@ -105,9 +105,12 @@ class PegInsertEnv(BaseEnv):
         control step would be wasted time)."""
         self.episode_info: dict[str, Any] = {}
         self._noise_gen = torch.Generator().manual_seed(0)
+        robot_uids = robot_uids or robot_uid_for(cfg.peg, cfg.peg_chamfer)
+        if robot_uids not in self.SUPPORTED_ROBOTS:  # a chamfered peg's robot, made on demand
+            self.SUPPORTED_ROBOTS = [*self.SUPPORTED_ROBOTS, robot_uids]
         super().__init__(
             *args,
-            robot_uids=robot_uids or robot_uid_for(cfg.peg, cfg.peg_chamfer),
+            robot_uids=robot_uids,
             render_backend=render_backend or device.render_backend(),
             **kwargs,
         )

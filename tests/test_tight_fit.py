@@ -1,0 +1,116 @@
+"""Tight-fit tasks (issue 11): task files, the chamfered peg, the wrist force reading and a
+contact model that behaves at 0.5 mm clearance (no tunnelling, no explosion, jams scored
+as failures)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cfvs_maniskill import geometry as G
+from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
+from cfvs_maniskill.agents.force_insert import spiral_pitch
+from cfvs_maniskill.agents.oracle import OracleAgent
+from cfvs_maniskill.constants import PEG_LENGTH, SQUARE_PEG_SIDE, TASKS_DIR
+from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.envs.task_config import TaskConfigError, load_task
+from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.robots.ur5 import chamfered_peg_mesh
+
+TIGHT = "PegInsert6DoF-0.5mm-v1"
+
+
+def test_tight_task_files():
+    for name, clearance in (("PegInsert6DoF-1mm", 0.001), ("PegInsert6DoF-0.5mm", 0.0005)):
+        cfg = load_task(TASKS_DIR / f"{name}.yaml")
+        assert cfg.clearance == clearance and cfg.peg_chamfer == 0.0015 and cfg.dof == 6
+    # The spiral's turns are never further apart than the band the peg can drop in from.
+    assert spiral_pitch(0.0012, 0.0005, 0.0) == 0.00025
+    assert spiral_pitch(0.0012, 0.004, 0.0) == 0.0012
+
+
+@pytest.mark.parametrize(
+    ("line", "words"),
+    [
+        ("peg_chamfer: 0.02", "peg_chamfer"),
+        ("peg_chamfer: -0.001", "peg_chamfer"),
+        ("peg_chamfer: 1mm", "expected a number"),
+        ("clearance: '0.5mm'", "expected a number"),
+    ],
+)
+def test_bad_tight_fields_name_the_field(tmp_path, line, words):
+    p = tmp_path / "Mine.yaml"
+    p.write_text(f"peg: square\n{line}\n")
+    with pytest.raises(TaskConfigError) as e:
+        load_task(p)
+    assert str(p) in str(e.value) and line.split(":")[0] in str(e.value) and words in str(e.value)
+
+
+def test_chamfered_peg_mesh():
+    m = chamfered_peg_mesh("square", 0.0015)
+    assert m.is_watertight and m.is_convex
+    tip = m.vertices[np.isclose(m.vertices[:, 2], PEG_LENGTH)]
+    assert np.allclose(np.abs(tip[:, :2]).max(axis=0), SQUARE_PEG_SIDE / 2 - 0.0015)
+    assert np.isclose(m.vertices[:, :2].max(), SQUARE_PEG_SIDE / 2)
+    box = SQUARE_PEG_SIDE**2 * PEG_LENGTH
+    assert 0.99 * box < m.volume < box  # only the edges are cut
+    r = chamfered_peg_mesh("round", 0.001)
+    assert r.is_convex and np.isclose(r.vertices[:, 2].max(), PEG_LENGTH)
+
+
+def _hole_z_force(env) -> float:
+    u = env.unwrapped
+    force, _, _ = u.peg_wrench()
+    return float(force @ u.hole_pose[:3, 2])
+
+
+@pytest.mark.slow
+def test_tight_fit_contact_model(make_env):
+    env = make_env(TIGHT, obs_mode="state")
+    u = env.unwrapped
+    assert u.agent.robot.links_map["peg"] is not None and "chamfer" in u.agent.uid
+
+    # The true pose: every episode ends at rest (no explosion), scored with its reason,
+    # and the tip never passes the floor although the insertion is commanded 1 cm past it.
+    # (The oracle's rate at 0.5 mm is in the README; here the fit must be possible at all.)
+    ex = Executor(env)
+    assert ex.insertion_mode == "force"
+    oracle = OracleAgent(env)
+    results = [run_episode(env, oracle, ex, seed=seed) for seed in range(4)]
+    assert any(r.success for r in results), [r.reason for r in results]
+    for r in results:
+        assert r.success or r.reason
+        assert r.tip_to_bottom_m > -0.001, r  # the floor holds
+        if r.success:
+            assert r.lateral_offset_m < 0.0005
+    qd = u.agent.robot.get_qvel()[0].cpu().numpy()
+    assert np.all(np.isfinite(qd)) and np.abs(qd).max() < 0.5
+
+    # 2 mm off the axis with the paper's position-controlled insertion and no search: the
+    # peg must stay on the rim (no tunnelling through 0.25 mm of play), pressing on it with
+    # a bounded force that the wrist reading sees, and the episode is scored a failure.
+    plain = Executor(env, ExecutorConfig(insertion="position", search_radius=0.0))
+    env.reset(seed=3)
+    plain.reset()
+    P = u.insertion_pose(-PRE_INSERT_HEIGHT)
+    P[:3, 3] += 0.002 * P[:3, 0]
+    assert plain.move_to(P).ok
+    plain.insert(u.task.hole_depth + PRE_INSERT_HEIGHT + 0.01, entry=PRE_INSERT_HEIGHT)
+    m = {k: float(v[0]) for k, v in u.evaluate().items()}
+    assert m["tip_depth"] < 0.0015 and not m["success"]
+    push = _hole_z_force(env)
+    assert 5.0 < push < 200.0, push  # the rim pushes the peg back out, tens of newtons
+
+    # A peg jammed 4 degrees askew is reported as not inserted, with its reason.
+    env.reset(seed=4)
+    plain.reset()
+    P = u.insertion_pose(-PRE_INSERT_HEIGHT)
+    tilt = np.eye(4)
+    tilt[:3, :3] = G.frame_with_z(
+        np.array([np.sin(np.radians(4)), 0, np.cos(np.radians(4))]), np.array([1.0, 0, 0])
+    )
+    assert plain.move_to(P @ tilt).ok
+    plain.insert(u.task.hole_depth + PRE_INSERT_HEIGHT + 0.01, entry=PRE_INSERT_HEIGHT)
+    m = {k: float(v[0]) for k, v in u.evaluate().items()}
+    assert not m["success"] and m["tip_to_bottom"] > 0.01
+    assert np.all(np.isfinite(u.tcp_matrix()))

@@ -23,6 +23,7 @@ import torch
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.force_insert import ForceInsertConfig, force_insert
+from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
 
 
 @dataclass
@@ -100,6 +101,10 @@ class Executor:
         if self.cfg.insertion != "auto":
             return self.cfg.insertion
         return "force" if self.env.task.clearance < self.cfg.force_below_clearance else "position"
+
+    def spiral(self, pitch: float, stalled_at: float) -> SpiralSearch:
+        """A rim search with this executor's speed and radius."""
+        return SpiralSearch(pitch, self.cfg.search_speed, self.cfg.search_radius, stalled_at)
 
     def _step(self, q: np.ndarray, qd: np.ndarray | None = None):
         """One control step towards joint positions q with joint velocities qd (rad/s)."""
@@ -181,22 +186,18 @@ class Executor:
         history = [0.0]
         steps0 = self.steps
         lateral = np.zeros(3)
-        spiral: dict | None = None  # search state once started
+        spiral: SpiralSearch | None = None  # search state once started
         while cmd < depth:
             done = float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis)
             cmd = min(depth, cmd + self.cfg.insert_speed * self.dt, done + self.cfg.max_lead)
             if spiral is not None:
-                if done > spiral["stalled_at"] + 0.003:
+                if done > spiral.stalled_at + 0.003:
                     spiral = None  # dropped into the hole: straight down from here
                 else:
-                    # Archimedean spiral r = pitch * angle / 2pi, walked at search_speed.
-                    r = max(self.cfg.search_pitch * spiral["angle"] / (2 * np.pi), 1e-4)
-                    spiral["angle"] += self.cfg.search_speed * self.dt / r
-                    r = self.cfg.search_pitch * spiral["angle"] / (2 * np.pi)
-                    if r > self.cfg.search_radius:
+                    offset = spiral.step(self.dt)
+                    if offset is None:
                         break  # searched the whole disc: give up on this insertion
-                    a = spiral["angle"]
-                    lateral = T0[:3, :3] @ np.array([r * np.cos(a), r * np.sin(a), 0.0])
+                    lateral = T0[:3, :3] @ offset
             T = T0.copy()
             T[:3, 3] = T0[:3, 3] + cmd * axis + lateral
             q_prev = q
@@ -205,11 +206,10 @@ class Executor:
                 return MoveResult(False, "insertion path unreachable", self.steps - steps0)
             self._step(q, (q - q_prev) / self.dt)
             history.append(float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis))
-            k = self.cfg.stall_steps
-            if spiral is None and len(history) > k and history[-1] - history[-1 - k] < 0.0005:
+            if spiral is None and stalled(history, self.cfg.stall_steps):
                 on_rim = history[-1] < entry + 0.005
                 if on_rim and self.cfg.search_radius > 0 and not np.any(lateral):
-                    spiral = {"angle": 0.0, "stalled_at": history[-1]}
+                    spiral = self.spiral(self.cfg.search_pitch, history[-1])
                     continue
                 break  # blocked: on the rim or at the bottom
         for _ in range(self.cfg.settle_steps):

@@ -52,6 +52,9 @@ class ForceInsertConfig:
     """How far the commanded tip may lead the real one in the entry zone, m (lighter push)."""
     hold_side_force: float = 8.0
     """In the entry zone the descent waits while the side force exceeds this, N."""
+    search_speed: float = 0.008
+    """Sliding speed along the spiral, m/s: slow enough (0.4 mm per control step) that the
+    peg drops in where it passes over the lead-in instead of sliding across it and out."""
     stall_steps_at_entry: int = 12
     """Control steps without 0.5 mm of progress in the entry zone before the spiral search
     starts: a peg turning into the chamfer advances slowly, and a spiral started then drags
@@ -133,7 +136,10 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
             k = cfg.stall_steps
         if spiral is None and stalled(history, k):
             if not in_hole and cfg.search_radius > 0 and not searched:
-                spiral, searched = executor.spiral(pitch, now), True
+                spiral = SpiralSearch(
+                    pitch, fcfg.search_speed, cfg.search_radius, now, min_radius=pitch / 4
+                )
+                searched = True
                 continue
             break  # at the bottom, or stuck
     return executor.steps - steps0, ""

@@ -19,11 +19,15 @@ class SpiralSearch:
     radius: float
     stalled_at: float
     """Insertion travel where the peg stalled on the rim (the drop is measured from it)."""
+    min_radius: float = 1e-4
+    """Radius used for the angular step near the centre. The paper-era 1e-4 m makes the
+    first step jump out to ~1.5 pitches (kept for the 4 mm tasks, whose results were measured
+    with it); the force-guided insertion uses a quarter pitch and so starts at the centre."""
     angle: float = 0.0
 
     def step(self, dt: float) -> np.ndarray | None:
         """Advance one control step; the offset in the tool's frame, None once past `radius`."""
-        r = max(self.pitch * self.angle / (2 * np.pi), 1e-4)  # no division by 0 at the centre
+        r = max(self.pitch * self.angle / (2 * np.pi), self.min_radius)  # no 0-division at r=0
         self.angle += self.speed * dt / r
         r = self.pitch * self.angle / (2 * np.pi)
         if r > self.radius:

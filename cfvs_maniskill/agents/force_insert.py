@@ -92,8 +92,13 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
         n = np.linalg.norm(w)
         if n > fcfg.max_rot_step:
             w *= fcfg.max_rot_step / n
+        z_before = C[:3, 2].copy()
         C[:3, :3] = Rotation.from_rotvec(w).as_matrix() @ C[:3, :3]
         z = C[:3, 2]
+        # Turn about the commanded tip, where the moment is taken: the line's zero-depth
+        # point moves so the tip stays put (turning about it, 3 cm up, swung the tip
+        # sideways into the wall and kept tilted pegs jammed at the entry).
+        centre = centre + cmd * (z_before - z)
         done = float((env.tcp_matrix()[:3, 3] - origin) @ z)
         side = force - (force @ z) * z
         if spiral is None:

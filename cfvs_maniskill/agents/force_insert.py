@@ -12,8 +12,10 @@ the oracle made 2/10 at 0.5 mm). Here instead, every control step:
   hole's rim and walls turn and centre the peg (a remote-centre-compliance device emulated
   in software; on the rim the whole moment is used, which lays the peg's face flat on it,
   inside the hole only the walls' side pushes are);
-* on the rim, a spiral search whose pitch is below what the peg can enter by
-  (its chamfer + half the clearance), so no entry point is skipped;
+* through the entry zone (around the expected entry, down past the chamfer) slowly and
+  lightly, waiting while the side force is still centring the peg;
+* on the rim, a slow spiral search from the centre whose pitch is below what the peg can
+  enter by (its chamfer + half the clearance), so no entry point is skipped;
 * in the hole, a stall ends the insertion only after `stall_steps_in_hole` steps without
   progress: the compliance needs time to free a peg that sticks.
 """

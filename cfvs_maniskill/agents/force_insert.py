@@ -12,8 +12,6 @@ the oracle made 2/10 at 0.5 mm). Here instead, every control step:
   hole's rim and walls turn and centre the peg (a remote-centre-compliance device emulated
   in software; on the rim the whole moment is used, which lays the peg's face flat on it,
   inside the hole only the walls' side pushes are);
-* through the entry zone (around the expected entry, down past the chamfer) slowly and
-  lightly, waiting while the side force is still centring the peg;
 * on the rim, a slow spiral search from the centre whose pitch is below what the peg can
   enter by (its chamfer + half the clearance), so no entry point is skipped;
 * in the hole, a stall ends the insertion only after `stall_steps_in_hole` steps without
@@ -46,14 +44,8 @@ class ForceInsertConfig:
     """Control steps without 0.5 mm of progress before a peg inside the hole counts as
     stuck (2 s at 20 Hz)."""
     entry_margin: float = 0.004
-    """The entry zone, where the descent is slow, reaches this far (m) above the expected
+    """The entry zone, where a stall waits `stall_steps_at_entry`, reaches this far (m) above the
     entry and below the end of the chamfer (covers the error of the hole's estimate)."""
-    entry_speed: float = 0.01
-    """Descent speed in the entry zone, m/s (0.5 mm per control step)."""
-    entry_lead: float = 0.0015
-    """How far the commanded tip may lead the real one in the entry zone, m (lighter push)."""
-    hold_side_force: float = 8.0
-    """In the entry zone the descent waits while the side force exceeds this, N."""
     search_speed: float = 0.008
     """Sliding speed along the spiral, m/s: slow enough (0.4 mm per control step) that the
     peg drops in where it passes over the lead-in instead of sliding across it and out."""
@@ -114,17 +106,7 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
             if offset is None:
                 return executor.steps - steps0, "searched the whole spiral"
             lateral = C[:3, :3] @ offset
-        if entry_zone[0] <= done <= entry_zone[1]:
-            # Through the chamfer slowly and lightly, and not at all while the side force
-            # is still centring the peg: a fast descent runs past the chamfer before the
-            # admittance has moved the peg onto the axis, and the full section lands on
-            # the rim (measured: most 1 mm failures were stuck 1.5-3 mm in).
-            speed, lead = fcfg.entry_speed, fcfg.entry_lead
-            if spiral is None and np.linalg.norm(side) > fcfg.hold_side_force:
-                speed = 0.0
-        else:
-            speed, lead = cfg.insert_speed, cfg.max_lead
-        cmd = min(depth, cmd + speed * executor.dt, done + lead)
+        cmd = min(depth, cmd + cfg.insert_speed * executor.dt, done + cfg.max_lead)
         T = C.copy()
         T[:3, 3] = centre + cmd * z + lateral
         q_prev = q

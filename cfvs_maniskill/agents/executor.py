@@ -102,10 +102,6 @@ class Executor:
             return self.cfg.insertion
         return "force" if self.env.task.clearance < self.cfg.force_below_clearance else "position"
 
-    def spiral(self, pitch: float, stalled_at: float) -> SpiralSearch:
-        """A rim search with this executor's speed and radius."""
-        return SpiralSearch(pitch, self.cfg.search_speed, self.cfg.search_radius, stalled_at)
-
     def _step(self, q: np.ndarray, qd: np.ndarray | None = None):
         """One control step towards joint positions q with joint velocities qd (rad/s)."""
         if self.env.control_mode == "pd_joint_pos_vel":
@@ -209,7 +205,10 @@ class Executor:
             if spiral is None and stalled(history, self.cfg.stall_steps):
                 on_rim = history[-1] < entry + 0.005
                 if on_rim and self.cfg.search_radius > 0 and not np.any(lateral):
-                    spiral = self.spiral(self.cfg.search_pitch, history[-1])
+                    c = self.cfg
+                    spiral = SpiralSearch(
+                        c.search_pitch, c.search_speed, c.search_radius, history[-1]
+                    )
                     continue
                 break  # blocked: on the rim or at the bottom
         for _ in range(self.cfg.settle_steps):

@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-from cfvs_maniskill.agents.force_insert import spiral_pitch
+from cfvs_maniskill.agents.force_insert import admittance_moment, spiral_pitch
 from cfvs_maniskill.agents.oracle import OracleAgent
 from cfvs_maniskill.agents.registry import make_agent
 from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
@@ -72,6 +73,32 @@ def test_spiral_search_covers_the_disc_without_gaps():
     assert gap.max() < pitch
     assert stalled([0.0, 0.0001, 0.0002, 0.0003], 3) and not stalled([0.0, 0.0003, 0.0006], 2)
     assert not stalled([0.0, 0.0], 3)  # too short a history to tell
+
+
+def test_admittance_turns_a_peg_passing_the_rim_against_its_axial_load():
+    """A peg pointing down (tip at the origin) carries a rim's upward push on its +x side.
+    Flat on the rim the command yields (that side rises, the face lays flat); passing the
+    rim that side is the high one, so the command lowers it, which straightens the peg; in
+    the hole an axial push says nothing about the tilt and nothing turns."""
+    corner = np.array([0.023, 0.0, 0.002])  # on the peg's +x side, 2 mm above the tip
+    push = np.array([0.0, 0.0, 10.0])  # the rim edge holds that side up, N
+    moment, side_moment = np.cross(corner, push), np.zeros(3)
+
+    def height_change(phase: str) -> float:
+        w = 0.003 * admittance_moment(phase, moment, side_moment)
+        return float((Rotation.from_rotvec(w).apply(corner) - corner)[2])
+
+    assert height_change("rim") > 1e-5
+    assert height_change("passing") < -1e-5
+    assert height_change("hole") == 0.0
+    # A wall's side push above the tip is yielded to in every phase: the peg's upper part
+    # moves away from the wall (+x push on the -x side turns the top towards +x).
+    wall_point, wall_push = np.array([-0.023, 0.0, 0.003]), np.array([8.0, 0.0, 0.0])
+    side = np.cross(wall_point, wall_push)
+    top = np.array([0.0, 0.0, 0.05])
+    for phase in ("passing", "hole"):
+        w = 0.003 * admittance_moment(phase, side, side)
+        assert (Rotation.from_rotvec(w).apply(top) - top)[0] > 1e-6, phase
 
 
 def test_chamfered_peg_mesh():
@@ -154,4 +181,17 @@ def test_cfvs_seats_pegs_that_stale_contacts_used_to_jam(make_env):
     agent, ex = make_agent("cfvs", env), Executor(env)
     for seed in (5000, 5012):
         r = run_episode(env, agent, ex, seed=seed)
+        assert r.success, (seed, r.reason)
+
+
+@pytest.mark.slow
+def test_cfvs_straightens_tilted_pegs_passing_the_rim(make_env):
+    """CFVS on two 0.5 mm episodes (unseen test object) whose pegs used to stop 2.2-2.6 mm
+    into the entry, tilted ~2 deg: the high side's chamfer on one rim edge, the low side
+    against the opposite wall. Yielding to the rim's push there lifted the high side further;
+    turning against it straightens the peg and it goes in."""
+    env = make_env(TIGHT, obs_mode="pointcloud")
+    agent, ex = make_agent("cfvs", env), Executor(env)
+    for seed in (913002097, 933831750):
+        r = run_episode(env, agent, ex, seed=seed, options={"object": "cuboid_test_1"})
         assert r.success, (seed, r.reason)

@@ -19,7 +19,10 @@ the oracle made 2/10 at 0.5 mm). Here instead, every control step:
   the opposite edge, so the axial load sits on the *high* side. Yielding to that moment
   (as on the flat rim) would lift the high side further and wedge the peg (measured: 124 of
   the 0.5 mm failures sat 2-3 mm in, 1.5-3 deg askew); here the peg turns the other way,
-  lowering the loaded side, which is what straightens it;
+  lowering the loaded side, which is what straightens it. The phase starts 1 mm past the
+  first touch (a peg on the flat rim stops where it touches, the estimated entry height can
+  be 1-2 mm off), the turn stays within 3 deg of the start pose, and a peg that stalls in
+  it goes back to its start orientation and searches as on the rim;
 * in the hole, a stall ends the insertion only after `stall_steps_in_hole` steps without
   progress: the compliance needs time to free a peg that sticks.
 """
@@ -65,10 +68,10 @@ class ForceInsertConfig:
     rim-passing phase): a peg on the flat rim stops where it touches, one in the chamfer
     moves on. A peg that drops off the spiral enters that phase too. (Counted from the
     estimated entry instead, a 1-2 mm error in the hole's height sent pegs on the rim into
-    it: measured, 1 mm success 0.90 -> 0.85.)"""
+    it: measured, 1 mm success 0.915 / 0.900 -> 0.880 / 0.845.)"""
     max_correction: float = np.radians(3.0)
     """Largest turn of the commanded pose away from the start pose, rad (the fine stage
-    leaves < 3 deg of tilt; a peg still on the rim but taken to be passing it turns
+    leaves 2.2 deg of tilt at p90; a peg still on the rim but taken to be passing it turns
     towards its load without end otherwise: measured, 10-45 deg tilts)."""
     max_steps: int = 1200
     """Give up after this many control steps (60 s)."""
@@ -155,7 +158,7 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
         now = float((env.tcp_matrix()[:3, 3] - origin) @ z)
         history.append(now)
         if now > entry + task.peg_chamfer + 0.003:
-            phase = "hole"
+            phase = "hole"  # the full section (above the chamfer) 3 mm past the rim
         elif phase == "rim" and not searched and contact_at is not None:
             phase = "passing" if now > contact_at + fcfg.passing_from else "rim"
         if phase != "rim":

@@ -96,7 +96,7 @@ def test_admittance_turns_a_peg_passing_the_rim_against_its_axial_load():
     wall_point, wall_push = np.array([-0.023, 0.0, 0.003]), np.array([8.0, 0.0, 0.0])
     side = np.cross(wall_point, wall_push)
     top = np.array([0.0, 0.0, 0.05])
-    for phase in ("passing", "hole"):
+    for phase in ("rim", "passing", "hole"):
         w = 0.003 * admittance_moment(phase, side, side)
         assert (Rotation.from_rotvec(w).apply(top) - top)[0] > 1e-6, phase
 

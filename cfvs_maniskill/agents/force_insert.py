@@ -96,6 +96,17 @@ def admittance_moment(phase: str, moment: np.ndarray, side_moment: np.ndarray) -
     return side_moment
 
 
+def _turn_about_tip(C: np.ndarray, centre: np.ndarray, cmd: float, R: np.ndarray) -> np.ndarray:
+    """Give the commanded pose C (4x4, changed in place) the rotation R about its tip, which
+    sits `cmd` along the axis from the insertion line's zero-depth point `centre`; returns
+    the moved `centre`. Turning about the tip, where the moment is taken, keeps the tip put
+    (turning about the line's start, 3 cm up, swung the tip sideways into the wall and kept
+    tilted pegs jammed at the entry)."""
+    z_before = C[:3, 2].copy()
+    C[:3, :3] = R
+    return centre + cmd * (z_before - C[:3, 2])
+
+
 def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: ForceInsertConfig):
     """Insert `depth` m along the commanded tcp pose `start` (4x4, world) with admittance.
 
@@ -124,15 +135,10 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
         n = np.linalg.norm(w)
         if n > fcfg.max_rot_step:
             w *= fcfg.max_rot_step / n
-        z_before = C[:3, 2].copy()
         R = Rotation.from_rotvec(w).as_matrix() @ C[:3, :3]
         if G.rot_angle(start[:3, :3].T @ R) <= fcfg.max_correction:
-            C[:3, :3] = R
+            centre = _turn_about_tip(C, centre, cmd, R)
         z = C[:3, 2]
-        # Turn about the commanded tip, where the moment is taken: the line's zero-depth
-        # point moves so the tip stays put (turning about it, 3 cm up, swung the tip
-        # sideways into the wall and kept tilted pegs jammed at the entry).
-        centre = centre + cmd * (z_before - z)
         done = float((env.tcp_matrix()[:3, 3] - origin) @ z)
         side = force - (force @ z) * z
         if spiral is None:
@@ -159,8 +165,13 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
         history.append(now)
         if now > entry + task.peg_chamfer + 0.003:
             phase = "hole"  # the full section (above the chamfer) 3 mm past the rim
-        elif phase == "rim" and not searched and contact_at is not None:
-            phase = "passing" if now > contact_at + fcfg.passing_from else "rim"
+        elif (
+            phase == "rim"
+            and not searched
+            and contact_at is not None
+            and now > contact_at + fcfg.passing_from
+        ):
+            phase = "passing"
         if phase != "rim":
             k = fcfg.stall_steps_in_hole
         elif entry_zone[0] <= now <= entry_zone[1]:
@@ -172,9 +183,7 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
                 # Short of the hole: on the rim, or a peg that slid off its edge into the
                 # chamfer and wedged there. Back to the start orientation (the travel is
                 # measured along the new axis), lay the face on the rim and search.
-                z_before = C[:3, 2].copy()
-                C[:3, :3] = start[:3, :3]
-                centre = centre + cmd * (z_before - C[:3, 2])
+                centre = _turn_about_tip(C, centre, cmd, start[:3, :3])
                 now = float((env.tcp_matrix()[:3, 3] - origin) @ C[:3, 2])
                 phase = "rim"
                 spiral = SpiralSearch(

@@ -77,9 +77,18 @@ class PegInsertEnv(BaseEnv):
         depth_noise_std: float | None = None,
         robot_uids: str | None = None,
         render_backend: str | None = None,
+        num_envs: int = 1,
         **kwargs,
     ):
         cfg = self.task
+        if num_envs != 1:
+            raise ValueError(
+                f"{cfg.env_id}: num_envs={num_envs} is not supported: the task's scene "
+                "sampling, evaluation and observation noise are single-scene (numpy) code. "
+                "Run many episodes in parallel with the evaluation's workers "
+                "(`python -m cfvs_maniskill.eval --workers N`) or a vector of single envs "
+                "(gymnasium.vector.AsyncVectorEnv of gym.make(..., num_envs=1))"
+            )
         if isinstance(init_error, str):
             if init_error not in cfg.init_error:
                 raise ValueError(
@@ -96,22 +105,28 @@ class PegInsertEnv(BaseEnv):
         self.geometries = [
             build_geometry(s, cfg.peg, cfg.clearance, cfg.hole_depth) for s in self.object_specs
         ]
-        self.hole_pose = np.eye(4)
-        """World pose of the current hole frame (origin: centre of the opening, +z out)."""
         self.object_index = 0
         self.defer_obs = False
         """While True, steps return an empty observation and render nothing (the executor
         sets it during moves: agents only look after a move ends, so rendering every
         control step would be wasted time)."""
         self.episode_info: dict[str, Any] = {}
+        self._init_error_m = 0.0
         self._noise_gen = torch.Generator().manual_seed(0)
+        self._noise_seed = 0
+        self._noise_draws = 0
+        """Observations that drew noise since the episode began: with `_noise_seed`, the
+        noise stream's position, which the task state carries (see get_state_dict)."""
+        self._noise_shapes: list[tuple[int, ...]] = []
+        """Shapes one observation draws, in order (fixed per obs mode; learned on first use)."""
         robot_uids = robot_uids or robot_uid_for(cfg.peg, cfg.peg_chamfer)
         if robot_uids not in self.SUPPORTED_ROBOTS:  # a chamfered peg's robot, made on demand
             self.SUPPORTED_ROBOTS = [*self.SUPPORTED_ROBOTS, robot_uids]
         super().__init__(
             *args,
             robot_uids=robot_uids,
-            render_backend=render_backend or device.render_backend(),
+            num_envs=1,
+            render_backend=device.render_backend(render_backend),
             **kwargs,
         )
 
@@ -250,6 +265,7 @@ class PegInsertEnv(BaseEnv):
         seed = int(self._batched_episode_rng[0].randint(0, 2**31 - 1))
         rng = np.random.default_rng(seed)
         self._noise_gen.manual_seed(seed)
+        self._noise_seed, self._noise_draws = seed, 0
         name = options.get("object")
         if name is not None:
             if name not in self.object_names:
@@ -273,24 +289,118 @@ class PegInsertEnv(BaseEnv):
             raise RuntimeError(f"no reachable scene in {MAX_INIT_TRIES} tries for {geom.name}")
         for i, obj in enumerate(self.hole_objects):
             obj.set_pose(G.to_pose(T_obj) if i == idx else sapien.Pose(p=PARK + [0, i, 0]))
-            # Parked objects are out of view, but the renderer would still draw them every
-            # frame: take them out of the render scene (issue 9).
+        self._show_only(idx)
+        self.object_index = idx
+        self._init_error_m = float(np.linalg.norm(T_start[:3, 3] - H[:3, 3]))
+        qt = torch.as_tensor(q0, dtype=torch.float32)[None]
+        self.agent.reset(qt)
+        self.episode_info = self._describe_episode()
+        # The sampled (float64) pose: the CFVS agent's generator is seeded from it, and the
+        # committed results were measured so.
+        self.episode_info["hole_pose"] = H.tolist()
+
+    def _describe_episode(self) -> dict[str, Any]:
+        H = self.hole_pose
+        return dict(
+            object=self.object_names[self.object_index],
+            tilt_deg=float(np.degrees(np.arccos(np.clip(H[2, 2], -1, 1)))),
+            init_error_m=self._init_error_m,
+            hole_pose=H.tolist(),
+        )
+
+    @property
+    def hole_pose(self) -> np.ndarray:
+        """World pose of the current hole frame (origin: centre of the opening, +z out),
+        from the active object's actor pose as PhysX holds it, so a restored state gives
+        the same pose back to the last bit."""
+        i = self.object_index
+        T_obj = G.to_matrix(self.hole_objects[i].pose.sp)
+        return T_obj @ G.make(np.eye(3), self.geometries[i].hole_frame)
+
+    def _show_only(self, idx: int) -> None:
+        """Render object idx only. Parked objects are out of view, but the renderer would
+        still draw them every frame, so they leave the render scene."""
+        for i, obj in enumerate(self.hole_objects):
             for body in obj._objs[0].get_components():
                 if isinstance(body, sapien.render.RenderBodyComponent):
                     if i == idx and not body.is_enabled:
                         body.enable()
                     elif i != idx and body.is_enabled:
                         body.disable()
-        self.object_index, self.hole_pose = idx, H
-        qt = torch.as_tensor(q0, dtype=torch.float32)[None]
-        self.agent.reset(qt)
-        tilt = np.degrees(np.arccos(np.clip(H[2, 2], -1, 1)))
-        self.episode_info = dict(
-            object=geom.name,
-            tilt_deg=float(tilt),
-            init_error_m=float(np.linalg.norm(T_start[:3, 3] - H[:3, 3])),
-            hole_pose=H.tolist(),
+
+    def _active_object(self) -> int:
+        """The hole object that is not parked (their poses are in the sim state)."""
+        for i, obj in enumerate(self.hole_objects):
+            if np.linalg.norm(obj.pose.sp.p - (PARK + [0, i, 0])) > 0.5:
+                return i
+        return self.object_index
+
+    # ------------------------------------------------------------------ task state
+    def get_state_dict(self):
+        """ManiSkill's sim state plus the task's own (what BaseEnv asks tasks to add).
+
+        The hole object's pose is an actor pose, so it is in the sim state already; which
+        object is active follows from it (the others are parked). Added here: the depth
+        noise stream's position (episode seed split into two exact 16-bit floats, and the
+        number of observations drawn) and the start's distance for `episode_info`.
+        """
+        state = super().get_state_dict()
+        seed = self._noise_seed
+        state["task"] = dict(
+            noise=torch.tensor(
+                [[seed >> 16, seed & 0xFFFF, self._noise_draws]], dtype=torch.float32
+            ),
+            init_error=torch.tensor([[self._init_error_m]], dtype=torch.float32),
         )
+        return state
+
+    def set_state_dict(self, state: dict, env_idx: torch.Tensor | None = None):
+        super().set_state_dict(state, env_idx)
+        task = state.get("task")
+        if task is not None:
+            hi, lo, draws = (int(round(float(x))) for x in np.asarray(task["noise"]).reshape(-1))
+            self._seek_noise((hi << 16) | lo, draws)
+            self._init_error_m = float(np.asarray(task["init_error"]).reshape(-1)[0])
+        self.object_index = self._active_object()
+        self._show_only(self.object_index)
+        self.episode_info = self._describe_episode()
+
+    def set_state(self, state, env_idx: torch.Tensor | None = None):
+        """The flat state back into get_state_dict()'s structure (ManiSkill's own set_state
+        keeps only actors and articulations and would drop the task's part)."""
+        state = torch.as_tensor(state)
+        if state.ndim == 1:
+            state = state[None]
+
+        def unflatten(template: dict, start: int) -> tuple[dict, int]:
+            out = {}
+            for k, v in template.items():
+                if isinstance(v, dict):
+                    out[k], start = unflatten(v, start)
+                    continue
+                n = v.shape[-1] if v.ndim > 1 else 1
+                out[k] = state[:, start : start + n]
+                start += n
+            return out, start
+
+        state_dict, used = unflatten(self.get_state_dict(), 0)
+        if used != state.shape[-1]:
+            raise ValueError(
+                f"{self.task.env_id}: a flat state of {state.shape[-1]} values, expected "
+                f"{used} (get_state()'s length for this env)"
+            )
+        self.set_state_dict(state_dict, env_idx)
+
+    def _seek_noise(self, seed: int, draws: int) -> None:
+        """Put the noise stream where it was after `draws` noisy observations of the
+        episode seeded `seed` (forward from here when that is ahead, else from its start)."""
+        if seed != self._noise_seed or draws < self._noise_draws:
+            self._noise_gen.manual_seed(seed)
+            self._noise_seed, self._noise_draws = seed, 0
+        for _ in range(draws - self._noise_draws):
+            for shape in self._noise_shapes:
+                torch.randn(shape, generator=self._noise_gen)
+        self._noise_draws = draws
 
     def _sample_object_pose(self, rng: np.random.Generator, geom) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.task
@@ -363,15 +473,24 @@ class PegInsertEnv(BaseEnv):
         obs = super().get_obs(info, unflattened)
         std = self.depth_noise_std
         if std > 0 and isinstance(obs, dict):
+            shapes = []
+
+            def randn(shape) -> torch.Tensor:
+                shapes.append(tuple(shape))
+                return torch.randn(shape, generator=self._noise_gen)
+
             if "pointcloud" in obs:
                 xyzw = obs["pointcloud"]["xyzw"]
-                noise = torch.randn(xyzw[..., :3].shape, generator=self._noise_gen) * std
+                noise = randn(xyzw[..., :3].shape) * std
                 xyzw[..., :3] += noise.to(xyzw.device) * (xyzw[..., 3:] > 0)
             for cam in obs.get("sensor_data", {}).values():
                 if "depth" in cam:  # int16 millimetres
                     d = cam["depth"]
-                    noise = torch.randn(d.shape, generator=self._noise_gen) * std * 1000
+                    noise = randn(d.shape) * std * 1000
                     cam["depth"] = torch.where(d > 0, (d + noise.round().to(d.dtype)), d)
+            if shapes:
+                self._noise_shapes = shapes
+                self._noise_draws += 1
         return obs
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):

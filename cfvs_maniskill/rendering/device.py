@@ -83,12 +83,34 @@ def _register_maniskill_backend() -> None:
     backend.render_backend_name_mapping[SWIFTSHADER_BACKEND] = "pci:0"
 
 
-def render_backend() -> str:
-    """The `render_backend` argument for ManiSkill envs on this machine."""
+GPU_BACKENDS = ("gpu", "cuda", "sapien_cuda")
+"""ManiSkill's names for a GPU render device: its stock scripts pass "gpu" by default."""
+
+
+def render_backend(requested: str | None = None) -> str:
+    """The `render_backend` argument for ManiSkill envs on this machine.
+
+    None picks the device. A GPU backend requested on a machine without one (ManiSkill's
+    scripts default to "gpu") falls back to SwiftShader with one warning, so the stock
+    tools run with their default flags; "none" and explicit devices ("pci:0") pass through.
+    """
+    if requested == "none":
+        return requested
     kind = configure()
     if kind == "missing":
         raise RenderDeviceError(missing_message())
-    return SWIFTSHADER_BACKEND if kind == SWIFTSHADER_BACKEND else "gpu"
+    if requested is None:
+        return SWIFTSHADER_BACKEND if kind == SWIFTSHADER_BACKEND else "gpu"
+    if kind == SWIFTSHADER_BACKEND and requested in GPU_BACKENDS:
+        if not _state.get("warned"):
+            _state["warned"] = "1"
+            warnings.warn(
+                f"render_backend={requested!r} asks for a GPU, but this machine has none: "
+                "rendering on SwiftShader (CPU Vulkan) instead",
+                stacklevel=3,
+            )
+        return SWIFTSHADER_BACKEND
+    return requested
 
 
 def missing_message() -> str:

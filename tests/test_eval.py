@@ -251,3 +251,26 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
 def test_report_on_an_empty_folder_exits_2(tmp_path):
     r = run_cli("cfvs_maniskill.report", str(tmp_path), "--out", str(tmp_path / "r"))
     assert r.returncode == 2 and "no result records" in r.stderr
+
+
+def test_named_object_is_skipped_for_tasks_its_peg_does_not_fit(tmp_path):
+    """A named object that hosts only the square peg: the round-peg task skips that pair
+    with one line; an object that fits none of the tasks stays an error."""
+    from cfvs_maniskill.eval.__main__ import EvalArgs, resolve
+
+    (tmp_path / "tri.yaml").write_text(
+        "name: tri_only_square\nhole: square\nbody:\n  prism: {sides: 3, radius: 0.1, height: 0.07}\n"
+    )
+    args = EvalArgs(
+        tasks=("PegInsert3DoF", "PegInsert6DoF"),
+        objects=("tri_only_square", "cylinder"),
+        assets=(tmp_path,),
+    )
+    assert resolve(args) == {
+        "PegInsert3DoF": ["cylinder"],
+        "PegInsert6DoF": ["cylinder", "tri_only_square"],
+    }
+    r = run_cli("cfvs_maniskill.eval", "--tasks", "PegInsert3DoF", "--objects",
+                "tri_only_square", "--assets", str(tmp_path), "--out", str(tmp_path / "o"))  # fmt: skip
+    assert r.returncode == 2
+    assert "tri_only_square" in r.stderr and "fits none of the tasks" in r.stderr

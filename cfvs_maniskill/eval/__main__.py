@@ -62,15 +62,38 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
     if args.episodes_per_object < 1:
         _fail(f"--episodes-per-object must be >= 1, got {args.episodes_per_object}")
     lib = load_library([str(a) for a in args.assets])
-    out = {}
+    out: dict[str, list[str]] = {}
+    hosted: dict[str, list[str]] = {}  # named object -> tasks that can use it
     for t in args.tasks:
         base = t.removesuffix("-v1")
         if base not in TASKS:
             _fail(f"unknown task '{t}'; valid: {', '.join(sorted(TASKS))}")
-        try:
-            out[base] = [s.name for s in lib.select(list(args.objects), profile=TASKS[base].peg)]
-        except SelectionError as e:
-            _fail(str(e))
+        profile = TASKS[base].peg
+        names: dict[str, None] = {}
+        for sel in args.objects:
+            named = sel in lib.specs
+            if named and profile not in lib.specs[sel].hole:
+                # A named object may suit only some of the tasks: skip just this pair.
+                holes = ", ".join(lib.specs[sel].hole)
+                print(f"skipping {base} x {sel}: it cannot host a {profile} peg (holes: {holes})")
+                hosted.setdefault(sel, [])
+                continue
+            try:
+                names.update(dict.fromkeys(s.name for s in lib.select([sel], profile=profile)))
+            except SelectionError as e:
+                _fail(str(e))
+            if named:
+                hosted.setdefault(sel, []).append(base)
+        if names:
+            out[base] = sorted(names)
+        else:
+            print(f"skipping {base}: none of the objects {list(args.objects)} fits its peg")
+    for name, tasks in hosted.items():
+        if not tasks:
+            _fail(
+                f"object '{name}' fits none of the tasks {list(args.tasks)} "
+                f"(it hosts {', '.join(lib.specs[name].hole)} pegs)"
+            )
     return out
 
 

@@ -14,6 +14,8 @@ takes milliseconds.
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 import json
 import logging
@@ -82,18 +84,50 @@ class HoleGeometry:
         return trimesh.Trimesh(self.visual_vertices, self.visual_faces, process=False)
 
     def mesh_files(self) -> tuple[Path, list[Path]]:
-        """OBJ files (visual, convex parts) for SAPIEN's loaders, written once per cache key."""
+        """OBJ files (visual, convex parts) for SAPIEN's loaders, written once per cache key.
+
+        Safe with any number of processes at once: each writes its own temporary folder
+        and publishes it with one atomic rename; the first to publish wins and the others
+        use its folder. A complete folder is never deleted, and a reader never sees a
+        partial one (it only uses a folder whose files are all there).
+        """
         d = cache_dir() / self.cache_key
         visual = d / "visual.obj"
         parts = [d / f"part{i:03d}.obj" for i in range(len(self.collision_parts))]
-        if not all(p.is_file() for p in [visual, *parts]):
-            tmp = Path(tempfile.mkdtemp(dir=cache_dir(), prefix=".tmp"))
+        files = [visual, *parts]
+        if all(p.is_file() for p in files):
+            return visual, parts
+        d.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=d.parent, prefix=".tmp"))
+        try:
             self.visual_trimesh().export(tmp / visual.name)
             for (v, f), p in zip(self.collision_parts, parts, strict=True):
                 trimesh.Trimesh(v, f, process=False).export(tmp / p.name)
-            shutil.rmtree(d, ignore_errors=True)
-            tmp.rename(d)
+            if not _publish_dir(tmp, d) and not all(p.is_file() for p in files):
+                # Only a damaged folder (files removed by hand) gets here: move it aside
+                # atomically (one process wins), then publish ours.
+                aside = Path(tempfile.mkdtemp(dir=d.parent, prefix=".old"))
+                with contextlib.suppress(OSError):
+                    os.rename(d, aside / "entry")
+                _publish_dir(tmp, d)
+                shutil.rmtree(aside, ignore_errors=True)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)  # ours, unless it was published
+        if not all(p.is_file() for p in files):
+            missing = [str(p) for p in files if not p.is_file()]
+            raise RuntimeError(f"hole cache entry {d} is incomplete: missing {missing}")
         return visual, parts
+
+
+def _publish_dir(tmp: Path, d: Path) -> bool:
+    """Rename tmp to d in one step; False when d already exists (someone else's entry)."""
+    try:
+        os.rename(tmp, d)  # atomic; fails on an existing non-empty folder
+        return True
+    except OSError as e:
+        if e.errno in (errno.EEXIST, errno.ENOTEMPTY):
+            return False
+        raise
 
 
 # --------------------------------------------------------------------------------------------
@@ -448,12 +482,22 @@ def build_geometry(
     for i, (pv, pf) in enumerate(parts):
         arrays[f"part{i}_v"], arrays[f"part{i}_f"] = pv, pf
     path.parent.mkdir(parents=True, exist_ok=True)
-    # Write to a temp file and rename: a crash never leaves a half-written cache entry.
+    # Write to a temp file and publish it with a hard link, which fails if the entry exists:
+    # with several processes building the same key at once, the first one wins and every
+    # process returns that entry, so all of them simulate the same geometry.
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.npz")
     os.close(fd)
     try:
         np.savez(tmp, **arrays)
-        shutil.move(tmp, path)
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            try:
+                return _load_cached(path, spec, profile, clearance, depth, key)
+            except (OSError, KeyError, ValueError):  # an unreadable old entry: replace it
+                os.replace(tmp, path)
+        except OSError:  # a file system without hard links: last writer wins
+            os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

@@ -55,6 +55,9 @@ clearance; the hole itself is cut afterwards, exactly."""
 """Concavity thresholds tried in turn until no convex part reaches into the hole."""
 HOLE_CHECK_SHRINK = 0.001
 """A part may not overlap the hole volume shrunk by this much (1 mm) on every side."""
+FACE_TOLERANCE = 0.001
+"""hole_frame.origin may sit this far (1 mm) off its face along the axis (CAD coordinates
+rounded by hand); the opening is put on the face itself."""
 
 
 def cache_dir() -> Path:
@@ -201,8 +204,6 @@ def _load_mesh_body(spec: HoleSpec) -> mf.Manifold:
         )
     if not mesh.is_volume:
         mesh.fix_normals()
-    lo, hi = mesh.bounds
-    mesh.apply_translation([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]])
     m = _to_manifold(mesh.vertices, mesh.faces)
     if m.status() != mf.Error.NoError or m.is_empty():
         raise HoleSpecError(
@@ -221,7 +222,8 @@ def _load_mesh_body(spec: HoleSpec) -> mf.Manifold:
 
 
 def body_solid(spec: HoleSpec) -> mf.Manifold:
-    """The body without the hole, in the body frame (bottom at z = 0, centred in x, y)."""
+    """The body without the hole in its own frame: primitives in the body frame (bottom at
+    z = 0, centred in x, y), a mesh in its file's coordinates (scaled to metres)."""
     b = spec.body
     if spec.body_kind == "box":
         sx, sy, sz = b["size"]
@@ -233,14 +235,45 @@ def body_solid(spec: HoleSpec) -> mf.Manifold:
         p = mf.Manifold.cylinder(b["height"], b["radius"], b["radius"], b["sides"])
         v = np.asarray(p.to_mesh().vert_properties)[:, :2]
         ang0 = np.arctan2(v[:, 1], v[:, 0]).min()
-        p = p.rotate([0, 0, float(np.degrees(np.pi / b["sides"] - ang0))])
-        lo, hi = p.bounding_box()[:3], p.bounding_box()[3:]
-        return p.translate([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, 0])
+        return p.rotate([0, 0, float(np.degrees(np.pi / b["sides"] - ang0))])
     return _load_mesh_body(spec)
 
 
-def _surface_z(body: mf.Manifold, at: tuple[float, float]) -> tuple[float, float] | None:
-    """(z where a ray down through `at` enters the body, z where it first leaves it)."""
+def _rotation_to_z(axis: np.ndarray) -> np.ndarray:
+    """The shortest rotation turning unit vector `axis` onto +z."""
+    c = float(axis[2])
+    if c < -1 + 1e-12:  # straight down: half a turn about x
+        return np.diag([1.0, -1.0, -1.0])
+    v = np.cross(axis, [0.0, 0.0, 1.0])
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + K @ K / (1 + c)
+
+
+def oriented_body(spec: HoleSpec) -> tuple[mf.Manifold, tuple[float, float], float | None]:
+    """The body in the body frame (hole axis +z, bottom at z = 0, centred in x, y), where
+    the hole opens in x, y, and the opening's height when `hole_frame` gives it (None: the
+    top face over that point)."""
+    body = body_solid(spec)
+    at: tuple[float, float] = spec.hole_at
+    origin = None
+    if spec.hole_frame is not None:
+        o, axis = spec.hole_frame
+        R = _rotation_to_z(np.asarray(axis, np.float64))
+        body = body.transform(np.hstack([R, np.zeros((3, 1))]))
+        scale = spec.body["scale"] if spec.body_kind == "mesh" else 1.0
+        origin = R @ (np.asarray(o, np.float64) * scale)
+    bb = body.bounding_box()
+    shift = np.array([-(bb[0] + bb[3]) / 2, -(bb[1] + bb[4]) / 2, -bb[2]])
+    body = body.translate(shift.tolist())
+    if origin is None:
+        return body, at, None
+    origin = origin + shift
+    return body, (float(origin[0]), float(origin[1])), float(origin[2])
+
+
+def _surface_crossings(body: mf.Manifold, at: tuple[float, float]) -> np.ndarray:
+    """Heights where the vertical line through `at` crosses the body's surface, top first:
+    from above, the 1st, 3rd, ... enter the body and the 2nd, 4th, ... leave it."""
     v, f = _from_manifold(body)
     tri = v[f].astype(np.float64)  # (F, 3, 3)
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
@@ -254,12 +287,7 @@ def _surface_z(body: mf.Manifold, at: tuple[float, float]) -> tuple[float, float
     l3 = 1 - l1 - l2
     eps = -1e-9
     hit = ok & (l1 >= eps) & (l2 >= eps) & (l3 >= eps)
-    if not hit.any():
-        return None
-    zs = np.unique(np.round((l1 * a[:, 2] + l2 * b[:, 2] + l3 * c[:, 2])[hit], 7))[::-1]
-    if len(zs) < 2:
-        return None
-    return float(zs[0]), float(zs[1])
+    return np.unique(np.round((l1 * a[:, 2] + l2 * b[:, 2] + l3 * c[:, 2])[hit], 7))[::-1]
 
 
 def _contained(body: mf.Manifold, solid: mf.Manifold) -> bool:
@@ -267,19 +295,65 @@ def _contained(body: mf.Manifold, solid: mf.Manifold) -> bool:
     return vol > 0 and (solid ^ body).volume() >= vol * (1 - 1e-6)
 
 
-def check_room(spec: HoleSpec, body: mf.Manifold, profile: str, clearance: float, depth: float):
-    """Raise HoleSpecError unless the body can host the hole; returns the hole-frame origin."""
+def check_room(
+    spec: HoleSpec,
+    body: mf.Manifold,
+    profile: str,
+    clearance: float,
+    depth: float,
+    at: tuple[float, float] | None = None,
+    z_open: float | None = None,
+):
+    """Raise HoleSpecError unless the body can host the hole; returns the hole-frame origin.
+
+    `at`, `z_open`: where the hole opens (body frame; from `oriented_body`). Without z_open
+    the hole opens on the body's top surface over `at` (the `hole_at` contract).
+    """
     fld = _body_field(spec)
-    at = spec.hole_at
-    z = _surface_z(body, at)
-    if z is None:
+    at = spec.hole_at if at is None else at
+    where = "hole_frame.origin" if spec.hole_frame is not None else "hole_at"
+    shown = list(spec.hole_frame[0]) if spec.hole_frame is not None else list(at)
+    zs = _surface_crossings(body, at)
+    if len(zs) < 2:
         raise HoleSpecError(
             spec.source,
-            "hole_at",
-            f"{list(at)} is not over the body's top face; expected a point within the body's "
-            "footprint (metres from its centre)",
+            where,
+            f"{shown} is not over the body's {'face' if z_open is not None else 'top face'}; "
+            "expected a point within the body's footprint"
+            + (" along hole_frame.axis" if z_open is not None else " (metres from its centre)"),
         )
-    z_top, z_exit = z
+    i = 0
+    if z_open is not None:
+        i = int(np.argmin(np.abs(zs - z_open)))
+        off = abs(zs[i] - z_open)
+        if off > FACE_TOLERANCE:
+            raise HoleSpecError(
+                spec.source,
+                where,
+                f"{shown} is {1000 * off:.1f} mm from the nearest surface of the body along "
+                f"hole_frame.axis; expected a point on the face the hole opens on (within "
+                f"{1000 * FACE_TOLERANCE:.0f} mm)",
+            )
+        if i % 2 == 1 or i + 1 >= len(zs):
+            raise HoleSpecError(
+                spec.source,
+                "hole_frame.axis",
+                f"points into the part at {shown}: the face there has material above it; "
+                "expected the face's outward normal",
+            )
+    z_top, z_exit = float(zs[i]), float(zs[i + 1])
+    half = hole_half_extent(profile, clearance)
+    # The peg comes in along the axis: nothing of the body may sit over the opening.
+    approach = hole_solid(profile, half - HOLE_CHECK_SHRINK, z_top + 1e-4, z_top + PEG_LENGTH, at)
+    over = approach.volume() - (approach - body).volume()
+    if over > 1e-9:
+        raise HoleSpecError(
+            spec.source,
+            where,
+            f"the body reaches over the opening at {shown}: {1e6 * over:.1f} cm^3 of it within "
+            f"{1000 * PEG_LENGTH:.0f} mm above the hole, where the peg comes in; expected a "
+            "clear approach along the hole's axis",
+        )
     need = depth + MIN_FLOOR
     if z_top - z_exit < need - 1e-9:
         raise HoleSpecError(
@@ -289,7 +363,6 @@ def check_room(spec: HoleSpec, body: mf.Manifold, profile: str, clearance: float
             f"{1000 * depth:.1f} mm depth + {1000 * MIN_FLOOR:.1f} mm floor: "
             f"{1000 * (need - (z_top - z_exit)):.1f} mm missing (hole deeper than the body)",
         )
-    half = hole_half_extent(profile, clearance)
 
     def fits(margin: float) -> bool:
         return _contained(
@@ -306,8 +379,8 @@ def check_room(spec: HoleSpec, body: mf.Manifold, profile: str, clearance: float
         raise HoleSpecError(
             spec.source,
             fld,
-            f"body too small for the {profile} hole ({1000 * 2 * half:.1f} mm wide) at hole_at "
-            f"{list(at)}: it needs {1000 * width:.1f} mm of top face (a {1000 * MIN_WALL:.1f} mm "
+            f"body too small for the {profile} hole ({1000 * 2 * half:.1f} mm wide) at {where} "
+            f"{shown}: it needs {1000 * width:.1f} mm of flat face (a {1000 * MIN_WALL:.1f} mm "
             f"wall all round) but leaves a wall of {1000 * max(wall, 0):.1f} mm: "
             f"{1000 * (MIN_WALL - wall):.1f} mm missing",
         )
@@ -421,6 +494,8 @@ def geometry_key(spec: HoleSpec, profile: str, clearance: float, depth: float) -
         "clearance": round(clearance, 9),
         "depth": round(depth, 9),
     }
+    if spec.hole_frame is not None:  # only then: older cache keys stay valid
+        payload["hole_frame"] = spec.hole_frame
     if spec.mesh_file is not None:
         payload["mesh_sha"] = hashlib.sha256(spec.mesh_file.read_bytes()).hexdigest()
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:20]
@@ -469,10 +544,10 @@ def build_geometry(
         except (OSError, KeyError, ValueError) as e:  # torn or stale file: rebuild it
             log.warning("ignoring unreadable cache file %s (%s)", path, e)
 
-    body = body_solid(spec)
-    origin = check_room(spec, body, profile, clearance, depth)
+    body, at, z_open = oriented_body(spec)
+    origin = check_room(spec, body, profile, clearance, depth, at, z_open)
     half = hole_half_extent(profile, clearance)
-    cut = body - hole_solid(profile, half, origin[2] - depth, origin[2] + 1.0, spec.hole_at)
+    cut = body - hole_solid(profile, half, origin[2] - depth, origin[2] + 1.0, at)
     v, f = _from_manifold(cut)
     parts = convex_decomposition(cut, origin, profile, half, clearance, depth, spec.source)
     height = float(v[:, 2].max())

@@ -11,7 +11,16 @@ The contract (DESIGN.md):
       prism:    {sides: 5, radius: 0.07, height: 0.07}  # regular polygon, circumradius
       mesh:     {file: bracket.obj, scale: 0.001}       # OBJ/STL/PLY, relative to the yaml
     hole_at: [0.0, 0.0]           # hole centre on the top face, metres from its centre
+    hole_frame:                   # or (instead of hole_at): the hole on any planar face
+      origin: [45.0, 0.0, 50.0]   #   centre of the opening, in the body's own frame
+      axis: [0.0, 0.0, 1.0]       #   out of the part: the face's outward normal
     color: [0.6, 0.6, 0.65]
+
+`hole_frame` is for real parts whose global top is a boss or a curved surface: the hole may
+open on any planar face, at any angle. Its origin is in the mesh file's own coordinates and
+units (`scale` applies to it as to the mesh), so it can be read off the CAD model; for
+primitive bodies it is in the body frame (metres, bottom centre). The body is turned so that
+`axis` points up, which makes the hole frame's z the body's +z as with `hole_at`.
 
 Every error names the file, the field and what was expected. Geometry checks that need the
 mesh (watertight, room for the hole) live in `objects.build`.
@@ -29,7 +38,8 @@ import yaml
 from cfvs_maniskill.constants import PEG_PROFILES
 
 SPLITS = ("train", "test")
-TOP_KEYS = ("name", "split", "hole", "body", "hole_at", "color")
+TOP_KEYS = ("name", "split", "hole", "body", "hole_at", "hole_frame", "color")
+HOLE_FRAME_KEYS = ("origin", "axis")
 BODY_FIELDS: dict[str, dict[str, str]] = {
     # kind -> field -> expected type ("size3", "pos", "int>=3", "path", "pos_opt")
     "box": {"size": "size3"},
@@ -64,6 +74,9 @@ class HoleSpec:
     color: tuple[float, ...]
     source: Path
     raw_text: str = field(repr=False, default="")
+    hole_frame: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    """(origin, unit axis) of the hole's opening in the body's own frame, or None: the hole
+    opens on the top face at hole_at."""
 
     @property
     def mesh_file(self) -> Path | None:
@@ -152,6 +165,26 @@ def _check_body(file: Path, body: Any) -> tuple[str, dict[str, Any]]:
     return kind, out
 
 
+def _check_hole_frame(file: Path, v: Any):
+    keys = ", ".join(HOLE_FRAME_KEYS)
+    if not isinstance(v, dict):
+        raise HoleSpecError(file, "hole_frame", f"expected a mapping with {keys}, got {v!r}")
+    for k in v:
+        if k not in HOLE_FRAME_KEYS:
+            raise HoleSpecError(file, f"hole_frame.{k}", f"unknown field; expected {keys}")
+    for k in HOLE_FRAME_KEYS:
+        if k not in v:
+            raise HoleSpecError(file, f"hole_frame.{k}", f"missing; hole_frame needs {keys}")
+    origin = _number_list(file, "hole_frame.origin", v["origin"], 3, positive=False)
+    axis = _number_list(file, "hole_frame.axis", v["axis"], 3, positive=False)
+    norm = sum(a * a for a in axis) ** 0.5
+    if norm < 1e-9:
+        raise HoleSpecError(
+            file, "hole_frame.axis", f"expected a non-zero direction (out of the part), got {axis}"
+        )
+    return origin, tuple(a / norm for a in axis)
+
+
 def parse_spec(data: Any, file: Path, raw_text: str = "") -> HoleSpec:
     """Validate an already-parsed YAML document. Raises HoleSpecError."""
     if not isinstance(data, dict):
@@ -184,6 +217,16 @@ def parse_spec(data: Any, file: Path, raw_text: str = "") -> HoleSpec:
         raise HoleSpecError(file, "body", "missing; expected one of " + ", ".join(BODY_FIELDS))
     kind, body = _check_body(file, data["body"])
     hole_at = _number_list(file, "hole_at", data.get("hole_at", [0.0, 0.0]), 2, positive=False)
+    hole_frame = None
+    if "hole_frame" in data:
+        if "hole_at" in data:
+            raise HoleSpecError(
+                file,
+                "hole_frame",
+                "give either hole_at (a point on the top face) or hole_frame (a point and an "
+                "axis on any planar face), not both",
+            )
+        hole_frame = _check_hole_frame(file, data["hole_frame"])
     color = data.get("color", [0.6, 0.6, 0.65])
     if (
         not isinstance(color, list | tuple)
@@ -201,6 +244,7 @@ def parse_spec(data: Any, file: Path, raw_text: str = "") -> HoleSpec:
         color=tuple(float(c) for c in color),
         source=file,
         raw_text=raw_text,
+        hole_frame=hole_frame,
     )
 
 

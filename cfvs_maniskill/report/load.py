@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
+
+from cfvs_maniskill.objects.library import load_library
 
 
 def init_label(rec: dict) -> str:
@@ -14,8 +17,13 @@ def init_label(rec: dict) -> str:
 
 def load_records(root: Path) -> list[dict]:
     """Records with `label` (the agent, or the folder's name when it names a variant of
-    that agent, e.g. results/cfvs_plain) and `init` (small / large)."""
-    out = []
+    that agent, e.g. results/cfvs_plain) and `init` (small / large).
+
+    Records on objects outside the default library (extra `--assets`, e.g. the CAD parts in
+    results/cad_parts) are left out: the paper's tables are about its test objects.
+    """
+    known = set(load_library().specs)
+    out, other = [], 0
     for f in sorted(root.rglob("*.jsonl")):
         if "archive" in f.relative_to(root).parts[:-1]:
             continue  # earlier measurements kept for the record (other code, settings)
@@ -27,6 +35,9 @@ def load_records(root: Path) -> list[dict]:
                 rec = json.loads(line)
             except ValueError:
                 continue  # a torn last line of a running evaluation
+            if rec.get("object") not in known:
+                other += 1
+                continue
             label = rec["agent"]
             if rec.get("search_radius_m") == 0:
                 label += "_plain"  # the paper's protocol: no compliant search
@@ -34,4 +45,9 @@ def load_records(root: Path) -> list[dict]:
                 label = folder  # a variant's folder: results/cfvs_plain, results/3drhd_plain
             rec["label"], rec["init"] = label, init_label(rec)
             out.append(rec)
+    if other:
+        print(
+            f"report: {other} records on objects outside the default library left out",
+            file=sys.stderr,
+        )
     return out

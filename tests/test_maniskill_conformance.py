@@ -39,8 +39,9 @@ FLOAT_ATOL = 1e-6
 """ManiSkill's own check allows 1e-4. PhysX recomputes link poses from the restored joint
 angles, which can differ from the simulated ones in the last bit (1e-7 m); 1 um is far
 tighter than anything a wrong hole, object or noise stream would give."""
-FLOAT_RTOL = 1e-5
-"""For values that amplify it: an angle in degrees (1e-7 rad is 6e-6 deg, more near 0)."""
+FLOAT_RTOL = 1e-4
+"""For values that amplify it: the tilt in degrees, from float32 link rotations recomputed
+by PhysX (measured: 1.1e-4 deg of 10.3 deg, relative 1.04e-5)."""
 
 
 EDGE_PIXELS = 0.02

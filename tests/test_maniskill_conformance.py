@@ -263,8 +263,9 @@ def assert_images_equal(a: np.ndarray, b: np.ndarray, what: str) -> None:
     if what.split("/")[-1] in ("depth", "xyzw", "rendered depth"):
         z = [_depth_image(x) for x in (a, b)]
         edges = _discontinuities(z[0]) | _discontinuities(z[1])
-        # Away from edges, an int16 depth may round the other way: 1 mm.
-        step = 1.0 if np.issubdtype(a.dtype, np.integer) else FLOAT_ATOL
+        # Away from edges, an int16 depth may round the other way (1 mm) and a cloud's
+        # point move by ManiSkill's own tolerance, 0.1 mm (seen: 2 of 16384 points).
+        step = 1.0 if np.issubdtype(a.dtype, np.integer) else 1e-4
         big = np.abs(a.astype(np.float64) - b.astype(np.float64)) > step
         stray = big.reshape(*a.shape[:-1], -1).any(-1).reshape(edges.shape) & ~edges
         assert not stray.any(), f"{what}: {stray.sum()} pixels differ away from any edge"

@@ -13,6 +13,7 @@ wrapper. The tool runs exactly as `python -m <module>` would, with the same argu
 
 from __future__ import annotations
 
+import importlib.util
 import runpy
 import sys
 
@@ -33,8 +34,6 @@ def main(argv: list[str]) -> int:
     import cfvs_maniskill  # noqa: F401  (registers the envs; picks the render device)
 
     try:
-        import importlib.util
-
         found = importlib.util.find_spec(module) is not None
     except ModuleNotFoundError:
         found = False

@@ -46,14 +46,14 @@ def measure(args: Args) -> tuple[list[Figure], str]:
     import gymnasium as gym
 
     import cfvs_maniskill  # noqa: F401
-    from cfvs_maniskill.agents.cfvs import CFVSAgent
     from cfvs_maniskill.agents.executor import Executor
+    from cfvs_maniskill.agents.registry import make_agent
     from cfvs_maniskill.episode import run_episode
 
     torch.set_num_threads(args.threads)
     env = gym.make("PegInsert6DoF-v1", obs_mode="pointcloud", objects=["test"])
     u = env.unwrapped
-    agent = CFVSAgent(env)
+    agent = make_agent("cfvs", env)
     fwd = {
         "OAKN": forward_ms(agent.oakn, int(agent.oakn_meta["points"]), args.repeats),
         "OPN": forward_ms(agent.opn, int(agent.opn_meta["points"]), args.repeats),

@@ -31,7 +31,7 @@ class BenchArgs:
 
 def main(args: BenchArgs) -> int:
     import cfvs_maniskill  # noqa: F401  (render device, tasks)
-    from benchmarks import cfvs_speed, env_step, eval_scaling, servo_time, startup
+    from benchmarks import cfvs_speed, env_step, eval_scaling, sensing, servo_time, startup
 
     t0 = time.perf_counter()
     sections: list[tuple[str, str]] = []
@@ -46,6 +46,7 @@ def main(args: BenchArgs) -> int:
 
     add("Env step against ManiSkill", env_step.step_ratio())
     add("Point-cloud observation against a bare SAPIEN scene", env_step.pointcloud_floor())
+    add("Realistic sensor model against the ideal one", sensing.overhead())
     add("CFVS episode and networks", cfvs_speed.measure(cfvs_speed.Args(episodes=args.episodes)))
     add("Servo time", servo_time.measure(args.servo_episodes))
     add(

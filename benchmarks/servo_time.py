@@ -12,14 +12,14 @@ def measure(episodes: int = 20) -> tuple[list[Figure], str]:
     import gymnasium as gym
     import torch
 
-    from cfvs_maniskill.agents.cfvs import CFVSAgent
     from cfvs_maniskill.agents.executor import Executor
+    from cfvs_maniskill.agents.registry import make_agent
     from cfvs_maniskill.episode import run_episode
 
     torch.set_num_threads(1)
     env = gym.make("PegInsert3DoF-v1", obs_mode="pointcloud", objects=["test"])
     u = env.unwrapped
-    agent, ex = CFVSAgent(env), Executor(env)
+    agent, ex = make_agent("cfvs", env), Executor(env)
     figures, lines = [], []
     for err, paper in (("small", 7.0), ("large", 7.1)):
         u.init_error_m = u.task.init_error[err]

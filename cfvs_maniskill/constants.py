@@ -9,6 +9,8 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 TASKS_DIR = PROJECT_ROOT / "tasks"
 HOLES_DIR = PROJECT_ROOT / "assets" / "holes"
 AGENTS_DIR = PROJECT_ROOT / "agents"
+SENSORS_DIR = PROJECT_ROOT / "sensors"
+"""Sensor profiles (`--sensor NAME`): one YAML file each."""
 
 PEG_PROFILES = ("round", "square")
 

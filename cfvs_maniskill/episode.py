@@ -10,6 +10,7 @@ import numpy as np
 
 from cfvs_maniskill.agents.base import Agent, Observation
 from cfvs_maniskill.agents.executor import Executor
+from cfvs_maniskill.agents.interface import robot_view
 from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
 
 INSERT_OVERSHOOT = 0.01
@@ -31,6 +32,8 @@ class EpisodeResult:
     tip_to_bottom_m: float
     lateral_offset_m: float
     wall_time_s: float
+    sensor: str = "ideal"
+    """The sensor profile the episode ran under."""
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -50,18 +53,29 @@ def failure_reason(m: dict, depth: float) -> str:
     return f"peg stuck {1000 * m['tip_to_bottom']:.1f} mm above the hole's bottom"
 
 
+def observe(env, obs) -> Observation:
+    """What the agent is given of an observation: the robot's own sensors only (interface.py)."""
+    u = env.unwrapped
+    return Observation(
+        obs=robot_view(obs),
+        tcp_pose=u.tcp_matrix(),  # the tcp link's pose: forward kinematics of the joints
+        qpos=u.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64),
+        wrench=u.wrist_wrench(),
+    )
+
+
 def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict | None = None):
     """Reset with `seed`, let the agent decide until it inserts or gives up, and score it."""
     t0 = time.perf_counter()
     u = env.unwrapped
-    obs, info = env.reset(seed=seed, options=options or {})
-    agent.reset(dict(u.episode_info))
+    obs, _ = env.reset(seed=seed, options=options or {})
+    agent.reset(seed)
     executor.reset()
     reason = ""
     inserted = False
     try:
         for _ in range(agent.max_decisions):
-            action = agent.act(Observation(obs, u.tcp_matrix(), info))
+            action = agent.act(observe(env, obs))
             if action.kind == "give_up":
                 reason = f"agent gave up: {action.reason}"
                 break
@@ -78,7 +92,7 @@ def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict 
             if not res.ok:
                 reason = res.reason
                 break
-            obs, info = executor.last_obs, executor.last_info
+            obs = executor.last_obs
         else:
             reason = f"no insertion after {agent.max_decisions} decisions"
     except FloatingPointError as e:
@@ -102,4 +116,5 @@ def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict 
         tip_to_bottom_m=round(clean["tip_to_bottom"], 5),
         lateral_offset_m=round(clean["lateral_offset"], 5),
         wall_time_s=round(time.perf_counter() - t0, 3),
+        sensor=u.sensor_profile.name,
     )

@@ -15,6 +15,7 @@ from cfvs_maniskill.agents.base import Action, Observation
 from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.hole_detect import HoleDetectConfig, detect_hole
 from cfvs_maniskill.agents.icp import ICPAgent, ICPConfig
+from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, make_agent
 from cfvs_maniskill.constants import hole_half_extent
 from cfvs_maniskill.envs.peg_insert import PARK
@@ -34,7 +35,7 @@ def test_icp_recovers_a_known_pose_of_the_model(make_env):
     """A partial, noisy view of the model body, moved by a known pose, registers back to it
     to within a millimetre and half a degree (open3d point-to-plane ICP)."""
     env = make_env("PegInsert3DoF-v1", obs_mode="pointcloud")
-    agent = ICPAgent(env, ICPConfig())
+    agent = ICPAgent(TaskSpec.of(env.unwrapped.task), ICPConfig())
     rng = np.random.default_rng(0)
     pts = np.asarray(agent.model.points)
     view = pts[pts[:, 2] > pts[:, 2].max() - 0.03]  # the top and upper walls, as a camera sees
@@ -130,7 +131,7 @@ def test_give_up_on_an_empty_cloud(make_env):
     blank = {"pointcloud": {"xyzw": torch.zeros((1, 100, 4))}}
     for name in ("icp", "icp_kpts", "3drhd"):
         a = make_agent(name, env)
-        a.reset(dict(env.unwrapped.episode_info))
+        a.reset(0)
         act = a.act(Observation(blank, env.unwrapped.tcp_matrix()))
         assert act.kind == "give_up" and act.reason, (name, act)
         assert isinstance(act, Action)

@@ -12,6 +12,7 @@ import torch
 
 from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, weights_for
 from cfvs_maniskill.agents.executor import Executor
+from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data.clouds import fine_crop, object_points, sample_fixed
 from cfvs_maniskill.episode import run_episode
@@ -108,14 +109,14 @@ def test_missing_weights_name_the_file(make_env, tmp_path):
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
     with pytest.raises(WeightsError, match=r"square/oakn.pt: weights file not found"):
-        CFVSAgent(env, CFVSConfig(weights_dir=tmp_path))
+        CFVSAgent(TaskSpec.of(env.unwrapped.task), CFVSConfig(weights_dir=tmp_path))
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("env_id", ["PegInsert3DoF-v1", "PegInsert6DoF-v1"])
 def test_cfvs_inserts_on_unseen_objects(make_env, env_id):
     env = make_env(env_id, obs_mode="pointcloud", objects=("test",))
-    agent = CFVSAgent(env)
+    agent = CFVSAgent(TaskSpec.of(env.unwrapped.task))
     ex = Executor(env)
     results = [run_episode(env, agent, ex, seed=s) for s in range(500, 508)]
     ok = sum(r.success for r in results)
@@ -131,8 +132,8 @@ def test_agent_gives_up_with_a_reason_when_it_sees_nothing(make_env):
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
     env.reset(seed=3)
-    agent = CFVSAgent(env)
-    agent.reset({})
+    agent = CFVSAgent(TaskSpec.of(env.unwrapped.task))
+    agent.reset(0)
     empty = {"pointcloud": {"xyzw": torch.zeros(1, 64, 4)}}
     a = agent.act(Observation(empty, env.unwrapped.tcp_matrix()))
     assert a.kind == "give_up" and "sees no hole object" in a.reason

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-from cfvs_maniskill.agents.force_insert import admittance_moment, spiral_pitch
+from cfvs_maniskill.agents.force_insert import admittance_moment, spiral_pitch, tip_wrench
 from cfvs_maniskill.agents.oracle import OracleAgent
 from cfvs_maniskill.agents.registry import make_agent
 from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
@@ -78,27 +78,39 @@ def test_spiral_search_covers_the_disc_without_gaps():
 def test_admittance_turns_a_peg_passing_the_rim_against_its_axial_load():
     """A peg pointing down (tip at the origin) carries a rim's upward push on its +x side.
     Flat on the rim the command yields (that side rises, the face lays flat); passing the
-    rim that side is the high one, so the command lowers it, which straightens the peg; in
-    the hole an axial push says nothing about the tilt and nothing turns."""
+    rim that side is the high one, so the command lowers it, which straightens the peg. In
+    the hole, a wall's push up the peg is yielded to: the top moves away from the wall."""
     corner = np.array([0.023, 0.0, 0.002])  # on the peg's +x side, 2 mm above the tip
     push = np.array([0.0, 0.0, 10.0])  # the rim edge holds that side up, N
-    moment, side_moment = np.cross(corner, push), np.zeros(3)
+    moment = np.cross(corner, push)
 
     def height_change(phase: str) -> float:
-        w = 0.003 * admittance_moment(phase, moment, side_moment)
+        w = 0.003 * admittance_moment(phase, moment)
         return float((Rotation.from_rotvec(w).apply(corner) - corner)[2])
 
     assert height_change("rim") > 1e-5
     assert height_change("passing") < -1e-5
-    assert height_change("hole") == 0.0
-    # A wall's side push above the tip is yielded to in every phase: the peg's upper part
-    # moves away from the wall (+x push on the -x side turns the top towards +x).
-    wall_point, wall_push = np.array([-0.023, 0.0, 0.003]), np.array([8.0, 0.0, 0.0])
+    # A wall's side push 2 cm up the peg (+x push on its -x side) turns its top towards +x.
+    wall_point, wall_push = np.array([-0.023, 0.0, 0.02]), np.array([8.0, 0.0, 0.0])
     side = np.cross(wall_point, wall_push)
     top = np.array([0.0, 0.0, 0.05])
-    for phase in ("rim", "passing", "hole"):
-        w = 0.003 * admittance_moment(phase, side, side)
-        assert (Rotation.from_rotvec(w).apply(top) - top)[0] > 1e-6, phase
+    w = 0.003 * admittance_moment("hole", side)
+    assert (Rotation.from_rotvec(w).apply(top) - top)[0] > 1e-6
+
+
+def test_wrist_wrench_moved_to_the_tip():
+    """The flange reading of a push at the tip has the push's moment about the flange; moved
+    to the tip it has none."""
+    flange = np.eye(4)
+    flange[:3, :3] = Rotation.from_euler("xyz", [0.3, -0.2, 1.0]).as_matrix()
+    flange[:3, 3] = [0.4, 0.1, 0.3]
+    tip = flange[:3, 3] + PEG_LENGTH * flange[:3, 2]
+    f_world = np.array([2.0, -1.0, 5.0])
+    m_flange_world = np.cross(tip - flange[:3, 3], f_world)
+    R = flange[:3, :3]
+    reading = np.concatenate([R.T @ f_world, R.T @ m_flange_world])
+    force, moment = tip_wrench(reading, flange, tip)
+    assert np.allclose(force, f_world) and np.allclose(moment, 0.0, atol=1e-12)
 
 
 def test_chamfered_peg_mesh():
@@ -115,7 +127,7 @@ def test_chamfered_peg_mesh():
 
 def _hole_z_force(env) -> float:
     u = env.unwrapped
-    force, _, _ = u.peg_wrench()
+    force, _ = u.contact_wrench()
     return float(force @ u.hole_pose[:3, 2])
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -33,23 +32,32 @@ class Action:
 
 @dataclass
 class Observation:
-    """What an agent sees each decision: the env's observation plus the tcp pose."""
+    """What an agent sees each decision: what a robot's own sensors report (interface.py)."""
 
-    obs: Any
+    obs: dict
+    """`robot_view` of the env's observation: the wrist cloud or wrist images only."""
     tcp_pose: np.ndarray
-    info: dict = field(default_factory=dict)
+    """4x4 world pose of the peg tip frame, by forward kinematics of the joint angles."""
+    qpos: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    """Joint angles, rad."""
+    wrench: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    """Wrist force/torque sensor: (fx, fy, fz, tx, ty, tz) in the flange frame, N and N m."""
 
 
 class Agent(abc.ABC):
-    """reset(info) at the start of an episode; act(observation) until it says insert."""
+    """Built from a `TaskSpec`; reset(seed) at the start of an episode; act(observation)
+    until it says insert."""
 
     name: str = "agent"
     obs_mode: str = "pointcloud"
     """The ManiSkill obs mode this agent needs."""
     max_decisions: int = 30
+    privileged: bool = False
+    """True only for the oracle, which is handed the env and reads true poses."""
 
-    def reset(self, info: dict) -> None:  # noqa: B027  (optional hook)
-        """Called once per episode with the env's episode info (object name, ...)."""
+    def reset(self, seed: int) -> None:  # noqa: B027  (optional hook)
+        """Called once per episode with the episode's seed (for the agent's own randomness:
+        the same seed gives the same episode)."""
 
     @abc.abstractmethod
     def act(self, observation: Observation) -> Action: ...

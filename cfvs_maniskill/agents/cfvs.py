@@ -16,7 +16,6 @@ the coarse move, `confidence_map=False` averages all candidate keypoints uniform
 from __future__ import annotations
 
 import json
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +24,7 @@ import torch
 import yaml
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
+from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.data import labels as L
@@ -94,10 +94,9 @@ class CFVSAgent(Agent):
     name = "cfvs"
     obs_mode = "pointcloud"
 
-    def __init__(self, env, cfg: CFVSConfig | None = None):
-        self.env = env.unwrapped
+    def __init__(self, task: TaskSpec, cfg: CFVSConfig | None = None):
+        self.task = task
         self.cfg = cfg or CFVSConfig()
-        task = self.env.task
         self.peg = task.peg
         files = weights_for(task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation)
         self.oakn, self.oakn_meta = load_weights(files["oakn"], "oakn", task.peg)
@@ -108,11 +107,11 @@ class CFVSAgent(Agent):
         self.fine_steps = 0
         self.last_estimate: np.ndarray | None = None
 
-    def reset(self, info: dict) -> None:
+    def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
-        # Point subsets are random; seed them from the scene (a stable hash, not Python's
-        # per-process salted hash()) so that the same env seed gives the same episode.
-        self.rng = np.random.default_rng(zlib.crc32(repr(info.get("hole_pose")).encode()))
+        # Point subsets are random; seeded from the episode's seed, the same env seed gives
+        # the same episode.
+        self.rng = np.random.default_rng(seed)
 
     # ------------------------------------------------------------------ perception
     @torch.no_grad()
@@ -146,8 +145,8 @@ class CFVSAgent(Agent):
         acts = [L.fine_action_from_keypoints(ki.numpy()) for ki in k]
         return np.mean(acts, axis=0).astype(np.float64)
 
-    def constrain(self, T: np.ndarray) -> np.ndarray:
-        return constrain(self.env, T)
+    def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        return constrain(self.task, T, ref)
 
     # ------------------------------------------------------------------ decisions
     def act(self, observation: Observation) -> Action:
@@ -159,13 +158,14 @@ class CFVSAgent(Agent):
                 return Action.give_up("OAKN: the camera sees no hole object")
             self.last_estimate = H
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
-            return Action.move(self.constrain(self.env.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp)))
+            pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, tcp)
+            return Action.move(self.constrain(pose, tcp))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
             a = self.predict_offset(xyzw, tcp)
             if a is None:
                 return Action.give_up("OPN: nothing seen around the peg")
-            if self.env.task.dof != 6:  # measure the remaining offset in the allowed DoF only
-                a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a)))
+            if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
+                a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
             small = (
                 np.linalg.norm(a[:3]) < self.cfg.tol_translation
                 and np.degrees(np.linalg.norm(a[3:])) < self.cfg.tol_rotation_deg

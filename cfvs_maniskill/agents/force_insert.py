@@ -7,11 +7,11 @@ the arm still lags its last move by 1-3 mm / 0.4 deg when the insertion starts (
 the oracle made 2/10 at 0.5 mm). Here instead, every control step:
 
 * the insertion runs along the *commanded* pre-insertion pose, which the arm converges to;
-* admittance: the commanded pose yields to the measured contact wrench (`env.peg_wrench`)
-  - rotation about the tip by `rot_gain` x moment, lateral by `lat_gain` x force - so the
-  hole's rim and walls turn and centre the peg (a remote-centre-compliance device emulated
-  in software; on the rim the whole moment is used, which lays the peg's face flat on it,
-  inside the hole only the walls' side pushes are);
+* admittance: the commanded pose yields to the wrist force/torque sensor's reading
+  (`env.wrist_wrench`, one 6-axis wrench at the flange, moved to the tip with the peg's
+  nominal length) - rotation about the tip by `rot_gain` x moment, lateral by `lat_gain` x
+  force - so the hole's rim and walls turn and centre the peg (a remote-centre-compliance
+  device emulated in software; on the rim this lays the peg's face flat on it);
 * on the rim, a slow spiral search from the centre whose pitch is below what the peg can
   enter by (its chamfer + half the clearance), so no entry point is skipped;
 * passing the rim (the tip in the opening, the full section reaching the rim's edge): a
@@ -19,7 +19,9 @@ the oracle made 2/10 at 0.5 mm). Here instead, every control step:
   the opposite edge, so the axial load sits on the *high* side. Yielding to that moment
   (as on the flat rim) would lift the high side further and wedge the peg (measured: 124 of
   the 0.5 mm failures sat 2-3 mm in, 1.5-3 deg askew); here the peg turns the other way,
-  lowering the loaded side, which is what straightens it. The phase starts 1 mm past the
+  lowering the loaded side, which is what straightens it. (With the contacts near the tip,
+  the moment across the axis is the axial load's: side pushes at the tip have a moment
+  about the tip along the axis only, so the whole measured moment is turned against.) The phase starts 1 mm past the
   first touch (a peg on the flat rim stops where it touches, the estimated entry height can
   be 1-2 mm off), the turn stays within 3 deg of the start pose, and a peg that stalls in
   it goes back to its start orientation and searches as on the rim;
@@ -36,6 +38,7 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
+from cfvs_maniskill.constants import PEG_LENGTH
 
 
 @dataclass
@@ -73,6 +76,9 @@ class ForceInsertConfig:
     """Largest turn of the commanded pose away from the start pose, rad (the fine stage
     leaves 2.2 deg of tilt at p90; a peg still on the rim but taken to be passing it turns
     towards its load without end otherwise: measured, 10-45 deg tilts)."""
+    contact_force: float = 1.0
+    """A tared reading above this (N) is the first touch (well above the sensor noise of
+    the shipped profiles: 0.1 N per axis)."""
     max_steps: int = 1200
     """Give up after this many control steps (60 s)."""
 
@@ -82,18 +88,21 @@ def spiral_pitch(search_pitch: float, clearance: float, chamfer: float) -> float
     return min(search_pitch, chamfer + clearance / 2)
 
 
-def admittance_moment(phase: str, moment: np.ndarray, side_moment: np.ndarray) -> np.ndarray:
+def admittance_moment(phase: str, moment: np.ndarray) -> np.ndarray:
     """The moment (world, about the tip) the commanded pose turns along with, by phase.
 
-    rim: all of it, which lays the tip face flat on the rim. passing: the walls' side pushes
-    are yielded to, the axial load's moment is turned against (the loaded side is the high
-    one, see the module doc). hole: only the side pushes (the axial friction's moment
-    depends on which wall point carries it and says little about the tilt)."""
-    if phase == "rim":
-        return moment
-    if phase == "passing":
-        return side_moment - (moment - side_moment)
-    return side_moment
+    rim and hole: all of it (on the rim it lays the tip face flat; in the hole the walls'
+    pushes up the peg dominate it). passing: turned against, since near the tip it is the
+    axial load's, on the high side (see the module doc)."""
+    return -moment if phase == "passing" else moment
+
+
+def tip_wrench(wrench: np.ndarray, flange: np.ndarray, tip: np.ndarray):
+    """A flange-frame wrist wrench (fx fy fz tx ty tz, about the flange) -> the world-frame
+    force and its moment about the peg tip."""
+    R = flange[:3, :3]
+    force, moment = R @ wrench[:3], R @ wrench[3:]
+    return force, moment + np.cross(flange[:3, 3] - tip, force)
 
 
 def _turn_about_tip(C: np.ndarray, centre: np.ndarray, cmd: float, R: np.ndarray) -> np.ndarray:
@@ -125,13 +134,18 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
     phase = "rim"  # -> "passing" (tip in the opening) -> "hole" (full section past the rim)
     searched = False
     contact_at: float | None = None  # travel at the first touch
+    # Tare: the peg is clear of the part here, so this reading is the sensor's offset.
+    tare = env.wrist_wrench()
     while cmd < depth:
         if executor.steps - steps0 >= fcfg.max_steps:
             return executor.steps - steps0, "insertion timed out"
-        force, moment, side_moment = env.peg_wrench()
-        if contact_at is None and np.linalg.norm(force) > 1.0:
+        tcp = env.tcp_matrix()  # forward kinematics
+        flange = tcp.copy()
+        flange[:3, 3] -= PEG_LENGTH * tcp[:3, 2]  # the peg's nominal length
+        force, moment = tip_wrench(env.wrist_wrench() - tare, flange, tcp[:3, 3])
+        if contact_at is None and np.linalg.norm(force) > fcfg.contact_force:
             contact_at = history[-1]
-        w = fcfg.rot_gain * admittance_moment(phase, moment, side_moment)
+        w = fcfg.rot_gain * admittance_moment(phase, moment)
         n = np.linalg.norm(w)
         if n > fcfg.max_rot_step:
             w *= fcfg.max_rot_step / n

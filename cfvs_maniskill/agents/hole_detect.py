@@ -25,6 +25,7 @@ from scipy import ndimage
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
+from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.constants import hole_half_extent
 from cfvs_maniskill.data.clouds import MIN_OBJECT_POINTS, object_points, tool_to_world
@@ -143,21 +144,21 @@ class HoleDetectAgent(Agent):
     obs_mode = "pointcloud"
     max_decisions = 2
 
-    def __init__(self, env, cfg: HoleDetectConfig | None = None):
-        self.env = env.unwrapped
+    def __init__(self, task: TaskSpec, cfg: HoleDetectConfig | None = None):
+        self.task = task
         self.cfg = cfg or HoleDetectConfig()
         # One thread: open3d's parallel sums change with the thread count, and so would the
         # episode (same seed -> same result on any machine); the clouds are small.
         o3d.utility.set_max_threads(1)
         self.moved = False
 
-    def reset(self, info: dict) -> None:
+    def reset(self, seed: int) -> None:
         self.moved = False
 
     def act(self, observation: Observation) -> Action:
         if self.moved:
             return Action.insert()
-        task = self.env.task
+        task = self.task
         xyzw = observation.obs["pointcloud"]["xyzw"][0].cpu().numpy()
         tcp = observation.tcp_pose
         # The whole scene as the camera saw it, less the robot's own peg (object_points keeps
@@ -170,5 +171,5 @@ class HoleDetectAgent(Agent):
         if hole is None:
             return Action.give_up("3DRHD: no hole-sized enclosed gap on any plane of the scene")
         self.moved = True
-        pose = self.env.insertion_pose(-PRE_INSERT_HEIGHT, hole.frame, tcp)
-        return Action.move(constrain(self.env, pose))
+        pose = insertion_pose(task.peg, hole.frame, -PRE_INSERT_HEIGHT, tcp)
+        return Action.move(constrain(task, pose, tcp))

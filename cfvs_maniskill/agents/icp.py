@@ -21,6 +21,7 @@ import trimesh
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
+from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.data.clouds import MIN_OBJECT_POINTS, object_points, tool_to_world
 from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
@@ -61,8 +62,8 @@ class ICPAgent(Agent):
     obs_mode = "pointcloud"
     max_decisions = 2
 
-    def __init__(self, env, cfg: ICPConfig | None = None):
-        self.env = env.unwrapped
+    def __init__(self, task: TaskSpec, cfg: ICPConfig | None = None):
+        self.task = task
         self.cfg = cfg or ICPConfig()
         # One thread: open3d's parallel sums change with the thread count, and so would the
         # episode (same seed -> same result on any machine); the clouds are small.
@@ -72,7 +73,6 @@ class ICPAgent(Agent):
                 f"ICPConfig.init: expected 'workspace' or 'oakn', got {self.cfg.init!r}"
             )
         self.name = "icp" if self.cfg.init == "workspace" else "icp_kpts"
-        task = self.env.task
         spec = load_library().select([self.cfg.model], profile=task.peg)[0]
         self.geom = build_geometry(spec, task.peg, task.clearance, task.hole_depth)
         self.model = model_cloud(self.geom, self.cfg.model_points)
@@ -81,20 +81,20 @@ class ICPAgent(Agent):
         if self.cfg.init == "oakn":
             from cfvs_maniskill.agents.cfvs import CFVSAgent
 
-            self.oakn = CFVSAgent(env)  # only its coarse stage (OAKN + Algorithm 1) is used
+            self.oakn = CFVSAgent(task)  # only its coarse stage (OAKN + Algorithm 1) is used
         self.moved = False
         self.fitness = 0.0
 
-    def reset(self, info: dict) -> None:
+    def reset(self, seed: int) -> None:
         self.moved = False
         if self.oakn is not None:
-            self.oakn.reset(info)
+            self.oakn.reset(seed)
 
     def initial_object_pose(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
         """The model's starting pose in the world (upright at the workspace centre, or
         placed so that its hole frame sits on OAKN's estimate)."""
         if self.oakn is None:
-            task = self.env.task
+            task = self.task
             centre = [np.mean(task.workspace_x), np.mean(task.workspace_y)]
             z = -float(self.geom.visual_vertices[:, 2].min())
             return G.make(np.eye(3), np.array([*centre, z]))
@@ -122,7 +122,7 @@ class ICPAgent(Agent):
             return Action.insert()
         xyzw = observation.obs["pointcloud"]["xyzw"][0].cpu().numpy()
         tcp = observation.tcp_pose
-        pts = object_points(xyzw, tcp, self.env.task.peg)
+        pts = object_points(xyzw, tcp, self.task.peg)
         if len(pts) < MIN_OBJECT_POINTS:
             return Action.give_up(f"{self.name}: the camera sees no hole object")
         T_init = self.initial_object_pose(xyzw, tcp)
@@ -136,4 +136,5 @@ class ICPAgent(Agent):
             )
         H = T_obj @ self.model_hole
         self.moved = True
-        return Action.move(constrain(self.env, self.env.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp)))
+        pose = insertion_pose(self.task.peg, H, -PRE_INSERT_HEIGHT, tcp)
+        return Action.move(constrain(self.task, pose, tcp))

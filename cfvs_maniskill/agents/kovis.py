@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
+from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.data import labels as L
@@ -50,19 +51,19 @@ class KOVISAgent(Agent):
     name = "kovis"
     obs_mode = "rgbd"
 
-    def __init__(self, env, cfg: KOVISAgentConfig | None = None):
-        self.env = env.unwrapped
+    def __init__(self, task: TaskSpec, cfg: KOVISAgentConfig | None = None):
+        self.task = task
         self.cfg = cfg or KOVISAgentConfig()
-        peg = self.env.task.peg
+        peg = task.peg
         self.net, self.meta = load_weights(self.cfg.weights_dir / f"{peg}.pt", "kovis", peg)
         self.max_decisions = self.cfg.max_steps + 2
         self.steps = 0
         self.upright = False
         self.best, self.stalled = np.inf, 0
 
-    def reset(self, info: dict) -> None:
+    def reset(self, seed: int) -> None:
         self.steps = 0
-        self.upright = self.env.task.dof == 6
+        self.upright = self.task.dof == 6
         self.best, self.stalled = np.inf, 0
 
     @torch.no_grad()
@@ -82,7 +83,7 @@ class KOVISAgent(Agent):
         tcp = observation.tcp_pose
         if not self.upright:
             self.upright = True
-            return Action.move(constrain(self.env, tcp, ref=tcp))
+            return Action.move(constrain(self.task, tcp, ref=tcp))
         if self.steps >= self.cfg.max_steps:
             return Action.insert()
         action, distance = self.motion(observation.obs)
@@ -93,4 +94,4 @@ class KOVISAgent(Agent):
         if distance < self.cfg.stop_distance or self.stalled >= self.cfg.patience:
             return Action.insert()
         self.steps += 1
-        return Action.move(constrain(self.env, L.apply_action(tcp, action), ref=tcp))
+        return Action.move(constrain(self.task, L.apply_action(tcp, action), ref=tcp))

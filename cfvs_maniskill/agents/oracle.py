@@ -11,12 +11,13 @@ class OracleAgent(Agent):
 
     name = "oracle"
     obs_mode = "state"
+    privileged = True
 
     def __init__(self, env):
         self.env = env.unwrapped
         self._moved = False
 
-    def reset(self, info: dict) -> None:
+    def reset(self, seed: int) -> None:
         self._moved = False
 
     def act(self, observation: Observation) -> Action:

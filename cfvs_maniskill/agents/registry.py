@@ -1,10 +1,14 @@
-"""Agent names for `--agent`, each a factory taking the env."""
+"""Agent names for `--agent`, each a factory taking the task's nominal constants (TaskSpec).
+
+Only the oracle's factory takes the env (it reads true poses: the ceiling, not an agent a
+robot could run); `make_agent` hands the env to nothing else."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
 from cfvs_maniskill.agents.base import Agent
+from cfvs_maniskill.agents.interface import TaskSpec
 
 
 def _oracle(env) -> Agent:
@@ -14,10 +18,10 @@ def _oracle(env) -> Agent:
 
 
 def _cfvs(**switches) -> Callable[..., Agent]:
-    def make(env) -> Agent:
+    def make(task: TaskSpec) -> Agent:
         from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
 
-        agent = CFVSAgent(env, CFVSConfig(**switches))
+        agent = CFVSAgent(task, CFVSConfig(**switches))
         if switches:
             agent.name = "cfvs_" + "_".join(f"no_{k}" for k in switches)
         return agent
@@ -26,24 +30,24 @@ def _cfvs(**switches) -> Callable[..., Agent]:
 
 
 def _icp(init: str) -> Callable[..., Agent]:
-    def make(env) -> Agent:
+    def make(task: TaskSpec) -> Agent:
         from cfvs_maniskill.agents.icp import ICPAgent, ICPConfig
 
-        return ICPAgent(env, ICPConfig(init=init))
+        return ICPAgent(task, ICPConfig(init=init))
 
     return make
 
 
-def _hole_detect(env) -> Agent:
+def _hole_detect(task: TaskSpec) -> Agent:
     from cfvs_maniskill.agents.hole_detect import HoleDetectAgent
 
-    return HoleDetectAgent(env)
+    return HoleDetectAgent(task)
 
 
-def _kovis(env) -> Agent:
+def _kovis(task: TaskSpec) -> Agent:
     from cfvs_maniskill.agents.kovis import KOVISAgent
 
-    return KOVISAgent(env)
+    return KOVISAgent(task)
 
 
 AGENTS: dict[str, Callable[..., Agent]] = {
@@ -63,9 +67,15 @@ AGENTS: dict[str, Callable[..., Agent]] = {
 AGENT_OBS_MODES = {"oracle": "state", "kovis": "rgbd"}
 """Agents not listed here see the wrist point cloud."""
 DEFAULT_AGENT = "cfvs"
+PRIVILEGED = {"oracle"}
+"""Factories that take the env itself (they read the truth)."""
 
 
 def make_agent(name: str, env) -> Agent:
+    """The agent `name` for `env`'s task: built from the task's constants alone, except the
+    privileged oracle."""
     if name not in AGENTS:
         raise KeyError(f"unknown agent '{name}'; valid: {', '.join(AGENTS)}")
-    return AGENTS[name](env)
+    if name in PRIVILEGED:
+        return AGENTS[name](env)
+    return AGENTS[name](TaskSpec.of(env.unwrapped.task))

@@ -219,9 +219,9 @@ class Collector:
         q_seed = u.agent.robot.get_qpos()[0].numpy()
         for _ in range(50):
             s = float(rng.uniform()) ** 1.5  # 0: at the goal, 1: at the start
-            T = G.interpolate(goal, constrain(u, start, ref=start), s)
+            T = G.interpolate(goal, constrain(u.task, start, ref=start), s)
             off = L.random_offset(rng, 0.005 + 0.02 * s, 5.0, 10.0 if task.dof > 3 else 0.0)
-            T = constrain(u, T @ off, ref=start)
+            T = constrain(u.task, T @ off, ref=start)
             if (G.inv(H) @ T)[2, 3] < 0.005:
                 continue  # the tip would be inside the object
             q, ok = u.ik(T, q_seed)

@@ -15,12 +15,16 @@ from mani_skill.utils.structs.types import SceneConfig, SimConfig
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.constants import hole_half_extent, peg_half_extent
+from cfvs_maniskill.agents.interface import insertion_pose
+from cfvs_maniskill.constants import PEG_LENGTH, hole_half_extent, peg_half_extent
 from cfvs_maniskill.envs.task_config import TaskConfig, load_tasks
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.rendering import device
-from cfvs_maniskill.robots.ur5 import TCP_LINK, robot_uid_for
+from cfvs_maniskill.robots.ur5 import CAMERA_UID, TCP_LINK, camera_pose_in_tool, robot_uid_for
+from cfvs_maniskill.sensing.depth import grid_points
+from cfvs_maniskill.sensing.model import GL_TO_CV, SensorModel
+from cfvs_maniskill.sensing.profile import load_profile
 
 PRE_INSERT_HEIGHT = 0.03
 """Pre-insertion pose: the peg tip this far above the hole's opening on its axis, metres."""
@@ -75,6 +79,7 @@ class PegInsertEnv(BaseEnv):
         assets: list[str] | tuple[str, ...] = (),
         init_error: str | float = "small",
         depth_noise_std: float | None = None,
+        sensor: str | None = None,
         robot_uids: str | None = None,
         render_backend: str | None = None,
         num_envs: int = 1,
@@ -98,7 +103,14 @@ class PegInsertEnv(BaseEnv):
             self.init_error_m = cfg.init_error[init_error]
         else:
             self.init_error_m = float(init_error)
-        self.depth_noise_std = cfg.depth_noise_std if depth_noise_std is None else depth_noise_std
+        self.sensor_profile = load_profile(sensor)
+        """The sensor profile (`sensors/<name>.yaml`): depth camera, hand-eye, wrench."""
+        profile_std = self.sensor_profile.depth.std
+        if depth_noise_std is not None:  # an explicit override wins
+            self.depth_noise_std = depth_noise_std
+        else:
+            self.depth_noise_std = cfg.depth_noise_std if profile_std is None else profile_std
+        self.sensing = SensorModel(self.sensor_profile, self.depth_noise_std)
         library = load_library(assets)
         self.object_specs = library.select(list(objects or cfg.objects), profile=cfg.peg)
         self.object_names = [s.name for s in self.object_specs]
@@ -194,14 +206,17 @@ class PegInsertEnv(BaseEnv):
         """True world pose of the peg tip frame (z along the peg, out of the flange)."""
         return G.to_matrix(self.agent.tcp.pose.sp)
 
-    def peg_wrench(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """What a wrist force/torque sensor would read of the peg's contacts, last physics
-        step: world-frame force (N) on the peg, its moment (N m) about the tip, and the
-        moment of the force's components across the peg axis only (the walls' push; the
-        axial part's moment depends on which rim point carries it, so it says little)."""
+    def flange_matrix(self) -> np.ndarray:
+        """True world pose of the flange (tool0): the tcp frame PEG_LENGTH back along z."""
         T = self.tcp_matrix()
-        tip, z = T[:3, 3], T[:3, 2]
-        force, moment, side_moment = np.zeros(3), np.zeros(3), np.zeros(3)
+        T[:3, 3] -= PEG_LENGTH * T[:3, 2]
+        return T
+
+    def contact_wrench(self) -> tuple[np.ndarray, np.ndarray]:
+        """Ground truth (tests only): the summed wrench of all the peg's contacts in the last
+        physics step, world frame: force (N) and its moment (N m) about the flange."""
+        origin = self.flange_matrix()[:3, 3]
+        force, moment = np.zeros(3), np.zeros(3)
         peg = self.agent.robot.links_map["peg"]._objs[0].entity
         rate = self.sim_freq  # PhysX reports impulses over one physics step
         for c in self.scene.px.get_contacts():
@@ -210,11 +225,21 @@ class PegInsertEnv(BaseEnv):
                 continue
             for point in c.points:  # the impulse acts on the contact's first body
                 f = sign * rate * np.asarray(point.impulse, np.float64)
-                r = np.asarray(point.position, np.float64) - tip
                 force += f
-                moment += np.cross(r, f)
-                side_moment += np.cross(r, f - (f @ z) * z)
-        return force, moment, side_moment
+                moment += np.cross(np.asarray(point.position, np.float64) - origin, f)
+        return force, moment
+
+    def wrist_wrench(self) -> np.ndarray:
+        """What a 6-axis force/torque sensor between the flange and the peg reads: the
+        contacts' wrench on the peg, in the flange frame about its origin, (fx, fy, fz, tx,
+        ty, tz) in N and N m, with the sensor profile's bias (fixed per episode) and noise
+        (one sample per control step, as a sensor polled at the control rate). The peg's
+        own weight is tared out, as a real cell does before inserting. Nothing per contact
+        is exposed: a real sensor sums them."""
+        force, moment = self.contact_wrench()
+        R = self.flange_matrix()[:3, :3]
+        wrench = np.concatenate([R.T @ force, R.T @ moment])
+        return wrench + self.sensing.wrench_error(int(self.elapsed_steps[0]))
 
     def ik(self, T: np.ndarray, seed: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
         """Joint positions putting the tcp at world pose T (the robot base is the world)."""
@@ -251,13 +276,7 @@ class PegInsertEnv(BaseEnv):
         nearest to `ref`'s x (the current tool), so the wrist never turns more than 45 deg.
         """
         H = self.hole_pose if hole is None else hole
-        z = -H[:3, 2]
-        x_hint = (self.tcp_matrix() if ref is None else ref)[:3, 0]
-        if self.task.peg == "square":
-            cands = [H[:3, 0], H[:3, 1], -H[:3, 0], -H[:3, 1]]
-            x_hint = max(cands, key=lambda c: float(c @ x_hint))
-        R = G.frame_with_z(z, x_hint)
-        return G.make(R, H[:3, 3] + depth * z)
+        return insertion_pose(self.task.peg, H, depth, self.tcp_matrix() if ref is None else ref)
 
     # ------------------------------------------------------------------ episodes
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
@@ -266,6 +285,7 @@ class PegInsertEnv(BaseEnv):
         rng = np.random.default_rng(seed)
         self._noise_gen.manual_seed(seed)
         self._noise_seed, self._noise_draws = seed, 0
+        self._start_sensing(seed)
         name = options.get("object")
         if name is not None:
             if name not in self.object_names:
@@ -360,6 +380,7 @@ class PegInsertEnv(BaseEnv):
         if task is not None:
             hi, lo, draws = (int(round(float(x))) for x in np.asarray(task["noise"]).reshape(-1))
             self._seek_noise((hi << 16) | lo, draws)
+            self._start_sensing(self._noise_seed)
             self._init_error_m = float(np.asarray(task["init_error"]).reshape(-1)[0])
         self.object_index = self._active_object()
         self._show_only(self.object_index)
@@ -390,6 +411,14 @@ class PegInsertEnv(BaseEnv):
                 f"{used} (get_state()'s length for this env)"
             )
         self.set_state_dict(state_dict, env_idx)
+
+    def _start_sensing(self, seed: int) -> None:
+        """Draw the episode's sensor errors and put the camera where its (mis)calibrated
+        mount really holds it: images come from the true camera, while the cloud is placed
+        in the world with the nominal mount, as a robot that trusts its calibration does."""
+        self.sensing.start_episode(seed)
+        camera = self.scene.sensors[CAMERA_UID].camera
+        camera.set_local_pose(camera_pose_in_tool() * G.to_pose(self.sensing.mount))
 
     def _seek_noise(self, seed: int, draws: int) -> None:
         """Put the noise stream where it was after `draws` noisy observations of the
@@ -471,8 +500,13 @@ class PegInsertEnv(BaseEnv):
         if self.defer_obs:
             return {}
         obs = super().get_obs(info, unflattened)
+        if not isinstance(obs, dict) or "sensor_param" not in obs:
+            return obs
+        if not self.sensing.is_iid:
+            return self._stereo_obs(obs)
+        self._misreport_camera(obs)
         std = self.depth_noise_std
-        if std > 0 and isinstance(obs, dict):
+        if std > 0:
             shapes = []
 
             def randn(shape) -> torch.Tensor:
@@ -491,6 +525,61 @@ class PegInsertEnv(BaseEnv):
             if shapes:
                 self._noise_shapes = shapes
                 self._noise_draws += 1
+        return obs
+
+    def _true_camera(self, obs: dict) -> dict[str, np.ndarray]:
+        """The wrist camera's true parameters, as the renderer placed it (in the observation
+        until `_misreport_camera` replaces them)."""
+        params = obs["sensor_param"][CAMERA_UID]
+        return {k: v[0].cpu().numpy().astype(np.float64) for k, v in params.items()}
+
+    def _misreport_camera(self, obs: dict, true_cam: dict | None = None, cloud: bool = True):
+        """With a hand-eye error, the cloud is placed with the believed (nominal) camera
+        pose, and the sensor parameters say that pose."""
+        if np.array_equal(self.sensing.mount, np.eye(4)):
+            return
+        true_cam = true_cam or self._true_camera(obs)
+        T_true = true_cam["cam2world_gl"]
+        T_rep = self.sensing.reported_cam2world_gl(T_true)
+        if cloud and "pointcloud" in obs:
+            M = torch.as_tensor(T_rep @ G.inv(T_true), dtype=torch.float32)
+            xyzw = obs["pointcloud"]["xyzw"]
+            xyzw[..., :3] = xyzw[..., :3] @ M[:3, :3].T.to(xyzw.device) + M[:3, 3].to(xyzw.device)
+        param = obs["sensor_param"].get(CAMERA_UID)
+        if param is not None:
+            param["cam2world_gl"] = torch.as_tensor(T_rep, dtype=torch.float32)[None]
+            ext = G.inv(T_rep @ GL_TO_CV)[:3]
+            param["extrinsic_cv"] = torch.as_tensor(ext, dtype=torch.float32)[None]
+
+    def _stereo_obs(self, obs: dict) -> dict:
+        """The profile's stereo depth model on the wrist camera's cloud or depth image."""
+        cam = self._true_camera(obs)
+        draw = self._noise_draws
+        h, w = self.task.camera_height, self.task.camera_width
+        if "pointcloud" in obs:
+            xyzw = obs["pointcloud"]["xyzw"]
+            x = xyzw[0].cpu().numpy().reshape(h, w, 4)
+            T = cam["cam2world_gl"].astype(np.float32)
+            local = (x[..., :3] - T[:3, 3]) @ T[:3, :3]  # world -> camera (OpenGL axes)
+            pts, ok = self.sensing.stereo_points_gl(local, x[..., 3] > 0, draw)
+            # Back to the world through the pose the robot believes the camera has.
+            B = self.sensing.reported_cam2world_gl(cam["cam2world_gl"]).astype(np.float32)
+            world = pts @ B[:3, :3].T + B[:3, 3]
+            world[~ok] = 0.0
+            out = np.concatenate([world, ok[..., None]], axis=-1)
+            obs["pointcloud"]["xyzw"] = torch.as_tensor(
+                out.reshape(1, h * w, 4), dtype=xyzw.dtype, device=xyzw.device
+            )
+        for name, data in obs.get("sensor_data", {}).items():
+            if name == CAMERA_UID and "depth" in data:  # int16 millimetres
+                d = data["depth"]
+                z = d[0, ..., 0].cpu().numpy().astype(np.float32) / 1000.0
+                pts = grid_points(z, cam["intrinsic_cv"])
+                new, ok = self.sensing.stereo_points_cv(pts, z > 0, draw)
+                mm = np.where(ok, np.round(new[..., 2] * 1000.0), 0.0)
+                data["depth"] = torch.as_tensor(mm, dtype=d.dtype, device=d.device)[None, ..., None]
+        self._misreport_camera(obs, cam, cloud=False)  # the cloud is placed already
+        self._noise_draws += 1
         return obs
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):

@@ -43,6 +43,10 @@ class EvalArgs:
     """Extra hole-object folders or files."""
     search_radius: float = 0.008
     """Compliant search radius of the shared executor, metres (0: the paper's protocol)."""
+    sensors: tuple[str, ...] = ("ideal",)
+    """Sensor profiles, a grid dimension: names of files in sensors/ (ideal: the paper's
+    protocol; realistic: a D405-class stereo camera, hand-eye error, a noisy wrist
+    force/torque sensor) or paths to profile files."""
 
 
 def _fail(message: str) -> None:
@@ -61,6 +65,7 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
             _fail(f"unknown agent '{a}'; valid: {', '.join(AGENTS)}")
     if args.episodes_per_object < 1:
         _fail(f"--episodes-per-object must be >= 1, got {args.episodes_per_object}")
+    sensor_files(args.sensors)
     lib = load_library([str(a) for a in args.assets])
     out: dict[str, list[str]] = {}
     hosted: dict[str, list[str]] = {}  # named object -> tasks that can use it
@@ -97,6 +102,19 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
     return out
 
 
+def sensor_files(sensors: tuple[str, ...]) -> dict[str, str]:
+    """Profile name -> name or file; an unknown profile or a bad file -> exit 2 naming it."""
+    from cfvs_maniskill.sensing.profile import load_profile
+
+    out = {}
+    for s in sensors:
+        try:
+            out[load_profile(s).name] = s
+        except ValueError as e:
+            _fail(str(e))
+    return out
+
+
 def main(args: EvalArgs) -> int:
     from tqdm import tqdm
 
@@ -107,8 +125,14 @@ def main(args: EvalArgs) -> int:
     from cfvs_maniskill.eval.worker import WorkerConfig
 
     objects = resolve(args)
+    files = sensor_files(args.sensors)
     jobs = make_jobs(
-        objects, list(args.agents), list(args.init_errors), args.episodes_per_object, args.seed
+        objects,
+        list(args.agents),
+        list(args.init_errors),
+        args.episodes_per_object,
+        args.seed,
+        list(files),
     )
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "episodes.jsonl"
@@ -119,7 +143,10 @@ def main(args: EvalArgs) -> int:
     todo = [j for j in jobs if j.key not in done]
     print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already in {path}, {len(todo)} to run")
     cfg = WorkerConfig(
-        objects=objects, assets=[str(a) for a in args.assets], search_radius=args.search_radius
+        objects=objects,
+        assets=[str(a) for a in args.assets],
+        search_radius=args.search_radius,
+        sensor_files=files,
     )
     t0 = time.perf_counter()
     t_first = None

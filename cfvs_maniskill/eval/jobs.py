@@ -15,17 +15,24 @@ class Job:
     init_error: str
     episode: int
     seed: int
+    sensor: str = "ideal"
 
     @property
     def key(self) -> str:
-        return job_key(self.task, self.agent, self.object, self.init_error, self.episode)
+        return job_key(
+            self.task, self.agent, self.object, self.init_error, self.episode, self.sensor
+        )
 
     def to_json(self) -> dict:
         return asdict(self)
 
 
-def job_key(task: str, agent: str, obj: str, init_error: str, episode: int) -> str:
-    return f"{task}|{agent}|{obj}|{init_error}|{episode}"
+def job_key(
+    task: str, agent: str, obj: str, init_error: str, episode: int, sensor: str = "ideal"
+) -> str:
+    """Records made before sensor profiles existed are `ideal` ones and keep their keys."""
+    key = f"{task}|{agent}|{obj}|{init_error}|{episode}"
+    return key if sensor == "ideal" else f"{key}|{sensor}"
 
 
 def scene_seed(task: str, obj: str, init_error: str, episode: int, base: int) -> int:
@@ -40,11 +47,14 @@ def make_jobs(
     init_errors: list[str],
     episodes_per_object: int,
     base_seed: int,
+    sensors: list[str] = ("ideal",),
 ) -> list[Job]:
-    """`tasks` maps each task to its objects. Ordered task, agent, object, error, episode,
-    so that consecutive jobs share an env and an agent."""
+    """`tasks` maps each task to its objects. Ordered sensor, task, agent, object, error,
+    episode, so that consecutive jobs share an env and an agent. A scene's seed does not
+    depend on the sensor: every profile sees the same scenes."""
     return [
-        Job(t, a, o, e, i, scene_seed(t, o, e, i, base_seed))
+        Job(t, a, o, e, i, scene_seed(t, o, e, i, base_seed), s)
+        for s in sensors
         for t, objects in tasks.items()
         for a in agents
         for o in objects

@@ -13,17 +13,18 @@ from cfvs_maniskill.stats import wilson_interval
 def write_summary(path: Path, out: Path, config: dict) -> str:
     cells: dict[tuple, list[dict]] = defaultdict(list)
     for rec in read_done(path).values():
-        cells[(rec["task"], rec["agent"], rec["init_error"])].append(rec)
+        sensor = rec.get("sensor", "ideal")  # records from before sensor profiles: ideal
+        cells[(rec["task"], rec["agent"], rec["init_error"], sensor)].append(rec)
     rows = [
-        "| task | agent | initial error | episodes | success | 95% CI | mean servo time |",
-        "|---|---|---|---|---|---|---|",
+        "| task | agent | initial error | sensor | episodes | success | 95% CI | mean servo time |",
+        "|---|---|---|---|---|---|---|---|",
     ]
-    for (task, agent, err), recs in sorted(cells.items()):
+    for (task, agent, err, sensor), recs in sorted(cells.items()):
         k, n = sum(r["success"] for r in recs), len(recs)
         lo, hi = wilson_interval(k, n)
         servo = sum(r["servo_time_s"] for r in recs) / n
         rows.append(
-            f"| {task} | {agent} | {err} | {n} | {k}/{n} = {k / n:.3f} | {lo:.3f}-{hi:.3f} "
+            f"| {task} | {agent} | {err} | {sensor} | {n} | {k}/{n} = {k / n:.3f} | {lo:.3f}-{hi:.3f} "
             f"| {servo:.2f} s |"
         )
     text = "\n".join(rows)

@@ -16,6 +16,8 @@ class WorkerConfig:
     """Objects per task (the env holds all of them; each job picks one)."""
     assets: list[str] = field(default_factory=list)
     search_radius: float = 0.008
+    sensor_files: dict[str, str] = field(default_factory=dict)
+    """Sensor profile name -> the file it came from (profiles given as paths)."""
 
 
 class Worker:
@@ -29,29 +31,30 @@ class Worker:
         # so with it fixed an episode's record does not depend on --workers.
         torch.set_num_threads(1)
         self.cfg = cfg
-        self.envs: dict[tuple[str, str], object] = {}
-        self.agents: dict[tuple[str, str], tuple] = {}
+        self.envs: dict[tuple[str, str, str], object] = {}
+        self.agents: dict[tuple[str, str, str], tuple] = {}
 
-    def _env(self, task: str, obs_mode: str):
+    def _env(self, task: str, obs_mode: str, sensor: str):
         import gymnasium as gym
 
-        key = (task, obs_mode)
+        key = (task, obs_mode, sensor)
         if key not in self.envs:
             self.envs[key] = gym.make(
                 f"{task}-v1",
                 obs_mode=obs_mode,
                 objects=self.cfg.objects[task],
                 assets=self.cfg.assets,
+                sensor=self.cfg.sensor_files.get(sensor, sensor),
             )
         return self.envs[key]
 
-    def _agent(self, task: str, name: str):
+    def _agent(self, task: str, name: str, sensor: str):
         from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
         from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, make_agent
 
-        key = (task, name)
+        key = (task, name, sensor)
         if key not in self.agents:
-            env = self._env(task, AGENT_OBS_MODES.get(name, "pointcloud"))
+            env = self._env(task, AGENT_OBS_MODES.get(name, "pointcloud"), sensor)
             executor = Executor(env, ExecutorConfig(search_radius=self.cfg.search_radius))
             self.agents[key] = (env, make_agent(name, env), executor)
         return self.agents[key]
@@ -61,7 +64,7 @@ class Worker:
         from cfvs_maniskill.episode import run_episode
 
         t0 = time.perf_counter()
-        env, agent, executor = self._agent(job.task, job.agent)
+        env, agent, executor = self._agent(job.task, job.agent, job.sensor)
         u = env.unwrapped
         u.init_error_m = u.task.init_error[job.init_error]
         r = run_episode(env, agent, executor, job.seed, options={"object": job.object})

@@ -48,15 +48,19 @@ def main(args: ReportArgs) -> int:
         video_md = videos.markdown(shown, args.out)
     else:
         video_md = "Not rendered (`--no-videos`)."
+    ideal = [r for r in records if r["sensor"] == "ideal"]  # the paper's protocol
     text = "\n\n".join(
         [
             f"# Report: {args.results} ({len(records)} episodes)",
-            "## Table II: success (averages over all objects in the results; columns: the paper's four)",
-            tables.table_ii(records),
-            "## Table III: 3-DoF visual servoing time (simulated, successes)",
-            tables.table_iii(records),
-            "## Table IV: ablation (6-DoF)",
-            tables.table_iv(records),
+            "## Table II: success, ideal sensor (averages over all objects in the results; "
+            "columns: the paper's four)",
+            tables.table_ii(ideal),
+            "## Success per sensor profile (sensors/*.yaml)",
+            tables.table_sensors(records),
+            "## Table III: 3-DoF visual servoing time (simulated, successes, ideal sensor)",
+            tables.table_iii(ideal),
+            "## Table IV: ablation (6-DoF, ideal sensor)",
+            tables.table_iv(ideal),
             "## Plots",
             "\n".join(f"![{p.stem}]({p.name})" for p in pngs),
             "## Videos: first success and first failure per agent and task",

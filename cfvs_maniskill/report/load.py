@@ -44,6 +44,7 @@ def load_records(root: Path) -> list[dict]:
             elif folder and folder.startswith(label + "_"):
                 label = folder  # a variant's folder: results/cfvs_plain, results/3drhd_plain
             rec["label"], rec["init"] = label, init_label(rec)
+            rec.setdefault("sensor", "ideal")  # records from before sensor profiles
             out.append(rec)
     if other:
         print(

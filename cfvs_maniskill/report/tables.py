@@ -64,6 +64,34 @@ def table_ii(records: list[dict]) -> str:
     return "\n".join(out)
 
 
+def table_sensors(records: list[dict]) -> str:
+    """Per task: each agent's success at 15 / 30 cm under every sensor profile in the
+    results, side by side, with the paper's (its protocol is the `ideal` profile)."""
+    sensors = sorted({r["sensor"] for r in records}, key=lambda s: (s != "ideal", s))
+    head = " | ".join(f"{s} {d}" for s in sensors for d in ("15 cm", "30 cm"))
+    out = []
+    for task in sorted({r["task"] for r in records}):
+        dof = _dof(task)
+        out += [
+            f"### {task}: success per sensor profile, ours [95% Wilson] (paper: ideal sensor)",
+            "",
+            f"| agent | {head} | paper 15 cm | paper 30 cm |",
+            "|---|" + "---|" * (2 * len(sensors) + 2),
+        ]
+        for label in sorted({r["label"] for r in records if r["task"] == task}):
+            recs = [r for r in records if r["task"] == task and r["label"] == label]
+            cells = [
+                _cell([r for r in recs if r["sensor"] == s and r["init"] == i])
+                for s in sensors
+                for i in INITS
+            ]
+            ref = paper.TABLE_II.get(dof, {}).get(label.removesuffix("_plain"))
+            pav = [f"{ref[0][j]:.2f}" if ref else "-" for j in range(2)]
+            out.append(f"| {label} | " + " | ".join(cells) + f" | {pav[0]} | {pav[1]} |")
+        out.append("")
+    return "\n".join(out)
+
+
 def table_iii(records: list[dict]) -> str:
     """3-DoF servo time of successful episodes, per agent."""
     out = [

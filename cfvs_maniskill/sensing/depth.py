@@ -1,0 +1,122 @@
+"""An active-stereo depth camera's errors, applied to a rendered (exact) depth image.
+
+Works on camera-frame points on the image grid (OpenCV convention: z forward, metres), so
+the same model serves the wrist point cloud and the wrist depth image. In order:
+
+1. grazing incidence: no return where the surface is seen more obliquely than
+   `max_incidence_deg` (the projected pattern is too stretched to match);
+2. depth discontinuities (a neighbour more than `edge_jump` nearer or further, or with no
+   return): the pixel is dropped (occlusion, failed left-right check) or becomes a "flying
+   pixel" between the near and far side (the matching window straddles the edge);
+3. axial noise in disparity d = f B / z (Gaussian, `disparity_noise_px`), so depth noise
+   grows as z^2 (Intel's RMS error = z^2 * subpixel / (f * B)), then the disparity's and
+   the depth unit's quantisation;
+4. lateral jitter of each pixel's ray; 5. range limits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cfvs_maniskill.sensing.profile import DepthModel
+
+_NEIGHBOURS = ((0, 1), (0, -1), (1, 0), (-1, 0))
+
+
+def _shifted(a: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
+    """a shifted by (dy, dx) pixels; what comes in from outside the image is `fill`."""
+    out = np.full_like(a, fill)
+    h, w = a.shape[:2]
+    ys, yd = (slice(0, h - dy), slice(dy, h)) if dy >= 0 else (slice(-dy, h), slice(0, h + dy))
+    xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
+    out[yd, xd] = a[ys, xs]
+    return out
+
+
+def incidence_deg(points: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Angle between each pixel's ray and its surface normal (from the neighbouring pixels'
+    points), degrees; NaN where the neighbours needed are missing."""
+    p = np.where(valid[..., None], points, np.float32(np.nan))
+    du = _shifted(p, 0, -1, np.nan) - _shifted(p, 0, 1, np.nan)
+    dv = _shifted(p, -1, 0, np.nan) - _shifted(p, 1, 0, np.nan)
+    n = np.empty_like(du)  # du x dv, written out (np.cross is slower on small arrays)
+    n[..., 0] = du[..., 1] * dv[..., 2] - du[..., 2] * dv[..., 1]
+    n[..., 1] = du[..., 2] * dv[..., 0] - du[..., 0] * dv[..., 2]
+    n[..., 2] = du[..., 0] * dv[..., 1] - du[..., 1] * dv[..., 0]
+    dot = np.abs(np.einsum("hwc,hwc->hw", n, points))
+    norm = np.sqrt(np.einsum("hwc,hwc->hw", n, n) * np.einsum("hwc,hwc->hw", points, points))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.degrees(np.arccos(np.minimum(dot / norm, 1.0)))
+
+
+def edge_mask(z: np.ndarray, valid: np.ndarray, jump: float) -> np.ndarray:
+    """Valid pixels next to a depth jump larger than `jump` or to a pixel with no return."""
+    edge = np.zeros_like(valid)
+    for dy, dx in _NEIGHBOURS:
+        zn = _shifted(z, dy, dx, np.nan)
+        vn = _shifted(valid, dy, dx, True)  # the image border is not an edge
+        with np.errstate(invalid="ignore"):
+            edge |= ~vn | (np.abs(zn - z) > jump)
+    return edge & valid
+
+
+def neighbour_range(z: np.ndarray, valid: np.ndarray, rows, cols) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest and furthest valid depth in the 3 x 3 neighbourhoods of pixels (rows, cols)."""
+    zp = np.pad(np.where(valid, z, np.nan), 1, constant_values=np.nan)
+    block = np.stack([zp[rows + dy, cols + dx] for dy in range(3) for dx in range(3)])
+    return np.nanmin(block, axis=0), np.nanmax(block, axis=0)
+
+
+def apply_stereo(
+    points: np.ndarray,
+    valid: np.ndarray,
+    model: DepthModel,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W, 3) camera-frame points (z forward) and their validity -> the sensor's."""
+    points = points.astype(np.float32)
+    z = points[..., 2]
+    valid = valid & (z > 0)
+    out_valid = valid.copy()
+    if model.max_incidence_deg < 90:
+        with np.errstate(invalid="ignore"):
+            out_valid &= ~(incidence_deg(points, valid) > model.max_incidence_deg)
+    z_new = z.copy()
+    if model.edge_dropout > 0 or model.edge_flying > 0:
+        rows, cols = np.nonzero(edge_mask(z, valid, model.edge_jump))
+        u = rng.random(len(rows), dtype=np.float32)
+        drop = u < model.edge_dropout
+        fly = ~drop & (u < model.edge_dropout + model.edge_flying)
+        zmin, zmax = neighbour_range(z, valid, rows[fly], cols[fly])
+        mix = rng.random(len(zmin), dtype=np.float32)
+        z_new[rows[fly], cols[fly]] = zmin + mix * (zmax - zmin)
+        out_valid[rows[drop], cols[drop]] = False
+    fb = np.float32(model.focal_px * model.baseline)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = fb / z_new
+        d += rng.standard_normal(z.shape, dtype=np.float32) * np.float32(model.disparity_noise_px)
+        if model.disparity_step_px > 0:
+            step = np.float32(model.disparity_step_px)
+            d = np.round(d / step) * step
+        z_new = np.where(d > 0, fb / d, np.float32(0.0))
+    if model.depth_unit > 0:
+        unit = np.float32(model.depth_unit)
+        z_new = np.round(z_new / unit) * unit
+    out_valid &= (z_new >= model.min_range) & (z_new <= model.max_range)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ray = points[..., :2] / z[..., None]  # x/z, y/z of each pixel's ray
+    if model.lateral_noise_px > 0:
+        jitter = np.float32(model.lateral_noise_px / model.focal_px)
+        ray += rng.standard_normal(ray.shape, dtype=np.float32) * jitter
+    out = np.concatenate([ray * z_new[..., None], z_new[..., None]], axis=-1)
+    out[~out_valid] = 0.0
+    return out, out_valid
+
+
+def grid_points(depth: np.ndarray, intrinsic: np.ndarray) -> np.ndarray:
+    """(H, W) depth (m) and the 3x3 OpenCV intrinsics -> (H, W, 3) camera-frame points."""
+    h, w = depth.shape
+    v, u = np.mgrid[0:h, 0:w].astype(np.float32) + 0.5
+    x = (u - intrinsic[0, 2]) / intrinsic[0, 0]
+    y = (v - intrinsic[1, 2]) / intrinsic[1, 1]
+    return np.stack([x * depth, y * depth, depth], axis=-1).astype(np.float32)

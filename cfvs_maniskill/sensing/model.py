@@ -1,0 +1,95 @@
+"""A sensor profile in action for one env: draws the per-episode errors (hand-eye, wrench
+bias) from the episode's seed and corrupts each observation with its own generator.
+
+Every random draw is a function of (episode seed, what is drawn, which observation or
+control step), so a restored state reproduces the same sensor readings without replaying
+anything."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from cfvs_maniskill import geometry as G
+from cfvs_maniskill.sensing.depth import apply_stereo
+from cfvs_maniskill.sensing.profile import SensorProfile
+
+GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
+"""OpenGL camera axes (x right, y up, z back) <-> OpenCV's (x right, y down, z forward)."""
+SAPIEN_CAM_TO_GL = np.array(
+    [[0.0, 0.0, -1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+)
+"""The OpenGL camera axes in a SAPIEN camera's frame (x forward, y left, z up)."""
+
+_HAND_EYE, _WRENCH_BIAS, _WRENCH_NOISE, _DEPTH = 1, 2, 3, 4
+"""Stream tags: each kind of draw has its own generator."""
+
+
+def _unit(rng: np.random.Generator) -> np.ndarray:
+    v = rng.standard_normal(3)
+    return v / np.linalg.norm(v)
+
+
+def mount_error(translation: float, rotation_deg: float, rng: np.random.Generator) -> np.ndarray:
+    """A rigid 4x4 transform moving by exactly `translation` m and turning by exactly
+    `rotation_deg`, in random directions."""
+    R = Rotation.from_rotvec(np.radians(rotation_deg) * _unit(rng)).as_matrix()
+    return G.make(R, translation * _unit(rng))
+
+
+class SensorModel:
+    def __init__(self, profile: SensorProfile, iid_std: float):
+        self.profile = profile
+        self.iid_std = iid_std
+        """Per-point noise of an iid depth model, m (profile's std, else the task's)."""
+        self.seed = 0
+        self.mount = np.eye(4)
+        """The camera's true mount relative to the nominal one (SAPIEN camera frame)."""
+        self.wrench_bias = np.zeros(6)
+
+    @property
+    def is_iid(self) -> bool:
+        return self.profile.depth.model == "iid"
+
+    def start_episode(self, seed: int) -> None:
+        self.seed = int(seed)
+        he, w = self.profile.hand_eye, self.profile.wrench
+        self.mount = np.eye(4)
+        if he.translation > 0 or he.rotation_deg > 0:
+            rng = np.random.default_rng([self.seed, _HAND_EYE])
+            self.mount = mount_error(he.translation, he.rotation_deg, rng)
+        scale = np.array([w.force_bias] * 3 + [w.torque_bias] * 3)
+        self.wrench_bias = np.random.default_rng([self.seed, _WRENCH_BIAS]).standard_normal(6)
+        self.wrench_bias *= scale
+
+    def wrench_error(self, step: int) -> np.ndarray:
+        """Bias + noise of the wrench reading at control step `step` (one sample per step)."""
+        w = self.profile.wrench
+        if w.force_noise == 0 and w.torque_noise == 0:
+            return self.wrench_bias.copy()
+        rng = np.random.default_rng([self.seed, _WRENCH_NOISE, step])
+        scale = np.array([w.force_noise] * 3 + [w.torque_noise] * 3)
+        return self.wrench_bias + rng.standard_normal(6) * scale
+
+    def reported_cam2world_gl(self, true_cam2world_gl: np.ndarray) -> np.ndarray:
+        """Where the robot believes the camera is (the nominal mount) given where it really
+        is: the true pose with the mount error taken back out."""
+        g = SAPIEN_CAM_TO_GL
+        return true_cam2world_gl @ G.inv(g) @ G.inv(self.mount) @ g
+
+    def depth_rng(self, draw: int) -> np.random.Generator:
+        return np.random.default_rng([self.seed, _DEPTH, draw])
+
+    def stereo_points_cv(
+        self, points: np.ndarray, valid: np.ndarray, draw: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W, 3) OpenCV camera-frame points -> the stereo sensor's (observation `draw`)."""
+        return apply_stereo(points, valid, self.profile.depth, self.depth_rng(draw))
+
+    def stereo_points_gl(
+        self, points_gl: np.ndarray, valid: np.ndarray, draw: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """As stereo_points_cv, in OpenGL camera axes."""
+        flip = np.array([1.0, -1.0, -1.0], dtype=np.float32)
+        out, ok = self.stereo_points_cv(points_gl * flip, valid, draw)
+        return out * flip, ok

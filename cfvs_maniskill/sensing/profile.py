@@ -1,0 +1,192 @@
+"""Sensor profiles: one small YAML file each in `sensors/` (or any path), chosen per run with
+`--sensor NAME`. A profile says how the wrist depth camera errs, how far off the hand-eye
+calibration is, and how noisy the wrist force/torque sensor is; nothing downstream may
+assume one profile's numbers. Unknown fields and profiles are errors that name them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from cfvs_maniskill.constants import SENSORS_DIR
+
+DEFAULT_SENSOR = "ideal"
+DEPTH_MODELS = ("iid", "stereo")
+
+
+class SensorProfileError(ValueError):
+    def __init__(self, file: Path | str, field_name: str, message: str):
+        super().__init__(f"{file}: field '{field_name}': {message}")
+
+
+@dataclass(frozen=True)
+class DepthModel:
+    """How the wrist camera's depth errs. Lengths in metres, pixels of the *modelled*
+    sensor (its own resolution, not the render's)."""
+
+    model: str = "iid"
+    """iid: Gaussian noise per point (the paper's protocol). stereo: an active-stereo camera
+    (noise in disparity, quantisation, edge artefacts, grazing dropouts, range limits)."""
+    std: float | None = None
+    """iid: per-point standard deviation, m (None: the task file's depth_noise_std)."""
+    focal_px: float = 0.0
+    """stereo: the sensor's focal length at its depth resolution, pixels."""
+    baseline: float = 0.0
+    """stereo: distance between the two imagers, m."""
+    disparity_noise_px: float = 0.0
+    """stereo: RMS error of the matched disparity (Intel's "subpixel RMS"), pixels. Axial
+    noise is then z^2 * this / (focal_px * baseline): it grows with the square of depth."""
+    disparity_step_px: float = 0.0
+    """stereo: disparity quantisation, pixels (0: none)."""
+    depth_unit: float = 0.0
+    """Reported depth quantisation, m (0: none)."""
+    lateral_noise_px: float = 0.0
+    """Gaussian jitter of where a pixel's ray points, sensor pixels."""
+    min_range: float = 0.0
+    """No return nearer than this, m."""
+    max_range: float = 10.0
+    """No return further than this, m."""
+    edge_jump: float = 0.005
+    """A pixel whose neighbour's depth differs by more than this (m), or that borders a
+    pixel with no return, is at a depth discontinuity."""
+    edge_dropout: float = 0.0
+    """Probability that a pixel at a discontinuity returns nothing (stereo occlusion,
+    failed left-right check)."""
+    edge_flying: float = 0.0
+    """Probability that a pixel at a discontinuity returns a depth between the near and the
+    far side (a "flying pixel": the matching window straddles the edge)."""
+    max_incidence_deg: float = 90.0
+    """No return where the surface is seen more obliquely than this (ray to normal)."""
+
+
+@dataclass(frozen=True)
+class HandEye:
+    """The camera mount's calibration error: a rigid transform of this size, in a random
+    direction drawn per episode; the robot does not know it."""
+
+    translation: float = 0.0
+    """m."""
+    rotation_deg: float = 0.0
+    """degrees."""
+
+
+@dataclass(frozen=True)
+class Wrench:
+    """The wrist force/torque sensor's errors (per axis, flange frame)."""
+
+    force_noise: float = 0.0
+    """N, standard deviation per reading."""
+    torque_noise: float = 0.0
+    """N m, standard deviation per reading."""
+    force_bias: float = 0.0
+    """N, standard deviation of an offset fixed for the episode (the sensor's zero drifts;
+    a cell tares it out before contact, as the force-guided insertion does)."""
+    torque_bias: float = 0.0
+    """N m, as force_bias."""
+
+
+@dataclass(frozen=True)
+class SensorProfile:
+    name: str
+    description: str = ""
+    sources: tuple[str, ...] = ()
+    """Where each number comes from (datasheets, papers; "assumed" where none)."""
+    depth: DepthModel = field(default_factory=DepthModel)
+    hand_eye: HandEye = field(default_factory=HandEye)
+    wrench: Wrench = field(default_factory=Wrench)
+    source: str = ""
+    """The file it was read from."""
+
+
+_SECTIONS = {"depth": DepthModel, "hand_eye": HandEye, "wrench": Wrench}
+
+
+def _section(path: Path, name: str, cls, data: Any):
+    if data is None:
+        return cls()
+    if not isinstance(data, dict):
+        raise SensorProfileError(path, name, f"expected a mapping of fields, got {data!r}")
+    known = {f.name: f for f in fields(cls)}
+    out = {}
+    for k, v in data.items():
+        if k not in known:
+            raise SensorProfileError(
+                path, f"{name}.{k}", f"unknown field; expected one of {', '.join(known)}"
+            )
+        if k == "model":
+            if v not in DEPTH_MODELS:
+                raise SensorProfileError(
+                    path, f"{name}.{k}", f"expected one of {', '.join(DEPTH_MODELS)}, got {v!r}"
+                )
+        elif v is None and k == "std":
+            pass
+        elif isinstance(v, bool) or not isinstance(v, int | float) or v < 0:
+            raise SensorProfileError(path, f"{name}.{k}", f"expected a number >= 0, got {v!r}")
+        else:
+            v = float(v)
+        out[k] = v
+    return cls(**out)
+
+
+def load_profile_file(path: Path) -> SensorProfile:
+    path = Path(path)
+    try:
+        data: Any = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise SensorProfileError(path, "<top>", f"not valid YAML: {e}") from None
+    if not isinstance(data, dict):
+        raise SensorProfileError(path, "<top>", "expected a mapping of profile fields")
+    top = {"description", "sources", *_SECTIONS}
+    for k in data:
+        if k not in top:
+            raise SensorProfileError(path, k, f"unknown field; expected one of {', '.join(top)}")
+    sources = data.get("sources") or []
+    if not isinstance(sources, list) or not all(isinstance(s, str) for s in sources):
+        raise SensorProfileError(path, "sources", "expected a list of strings")
+    sections = {k: _section(path, k, cls, data.get(k)) for k, cls in _SECTIONS.items()}
+    profile = SensorProfile(
+        name=path.stem,
+        description=str(data.get("description", "")),
+        sources=tuple(sources),
+        source=str(path),
+        **sections,
+    )
+    d = profile.depth
+    if d.model == "stereo" and (d.focal_px <= 0 or d.baseline <= 0):
+        raise SensorProfileError(
+            path, "depth.focal_px", "a stereo model needs focal_px > 0 and baseline > 0"
+        )
+    if d.min_range >= d.max_range:
+        raise SensorProfileError(path, "depth.min_range", "expected min_range < max_range")
+    for k in ("edge_dropout", "edge_flying"):
+        if getattr(d, k) > 1:
+            raise SensorProfileError(path, f"depth.{k}", "a probability: expected 0 <= p <= 1")
+    if d.edge_dropout + d.edge_flying > 1:
+        raise SensorProfileError(path, "depth.edge_flying", "edge_dropout + edge_flying > 1")
+    return profile
+
+
+def available_profiles(directory: Path = SENSORS_DIR) -> list[str]:
+    return sorted(p.stem for p in Path(directory).glob("*.yaml"))
+
+
+def load_profile(name_or_path: str | SensorProfile | None) -> SensorProfile:
+    """A profile by name (`sensors/<name>.yaml`) or by file path; None: the default."""
+    if isinstance(name_or_path, SensorProfile):
+        return name_or_path
+    name = name_or_path or DEFAULT_SENSOR
+    path = Path(name)
+    if path.suffix in (".yaml", ".yml") or path.is_file():
+        if not path.is_file():
+            raise SensorProfileError(path, "<file>", "no such sensor profile file")
+        return load_profile_file(path)
+    candidate = SENSORS_DIR / f"{name}.yaml"
+    if not candidate.is_file():
+        raise ValueError(
+            f"unknown sensor profile '{name}'; available: {', '.join(available_profiles())} "
+            f"(files in {SENSORS_DIR}), or a path to a .yaml profile"
+        )
+    return load_profile_file(candidate)

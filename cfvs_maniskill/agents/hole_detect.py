@@ -28,14 +28,17 @@ from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.constants import hole_half_extent
-from cfvs_maniskill.data.clouds import MIN_OBJECT_POINTS, object_points, tool_to_world
+from cfvs_maniskill.data.clouds import MIN_OBJECT_POINTS, fit_table, object_points, tool_to_world
 from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
 
 
 @dataclass
 class HoleDetectConfig:
-    plane_distance: float = 0.003
-    """RANSAC inlier distance, metres (3 sigma of the 1 mm depth noise)."""
+    plane_sigmas: float = 3.0
+    """RANSAC inlier distance, in sigmas of the depth noise measured on the table (fitted
+    to the cloud, so it follows the sensor attached)."""
+    min_plane_distance: float = 0.001
+    """... but at least this, metres."""
     max_planes: int = 5
     """Planes peeled off the scene before giving up."""
     min_plane_points: int = 60
@@ -117,11 +120,12 @@ def detect_hole(
     """The most hole-like enclosed gap on any plane of the scene, or None."""
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(world.astype(np.float64)))
     o3d.utility.random.seed(0)
+    distance = max(cfg.plane_sigmas * fit_table(world).sigma, cfg.min_plane_distance)
     candidates: list[HoleCandidate] = []
     for _ in range(cfg.max_planes):
         if len(cloud.points) < cfg.min_plane_points:
             break
-        (a, b, c, d), idx = cloud.segment_plane(cfg.plane_distance, 3, 500)
+        (a, b, c, d), idx = cloud.segment_plane(distance, 3, 500)
         if len(idx) < cfg.min_plane_points:
             break
         pts = np.asarray(cloud.points)[idx]

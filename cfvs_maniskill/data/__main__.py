@@ -43,7 +43,13 @@ def main(argv: list[str] | None = None) -> int:
             print(show(args.file, args.index, args.out))
         else:
             from cfvs_maniskill.data.collect import collect
+            from cfvs_maniskill.sensing.profile import load_profile
 
+            try:
+                load_profile(args.sensor)
+            except ValueError as e:
+                print(f"error: {e}", file=sys.stderr)
+                return 2
             collect(args)
     except (DatasetError, TaskConfigError, SelectionError, HoleSpecError) as e:
         print(f"error: {e}", file=sys.stderr)

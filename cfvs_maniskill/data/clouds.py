@@ -10,12 +10,20 @@ before sampling; what is left is the hole object, at full point budget.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from cfvs_maniskill.constants import PEG_LENGTH, peg_half_extent
 
-TABLE_MARGIN = 0.006
-"""Points below this world height are the table (its top is z = 0; 6 sigma of 1 mm noise)."""
+TABLE_BAND = 0.02
+"""The table plane is fitted to points within this height of its nominal top (z = 0): a
+hand-eye error tilts and shifts it by millimetres, never by centimetres."""
+TABLE_SIGMAS = 6.0
+"""Points less than this many noise sigmas above the fitted table are the table (the noise
+scale is measured on the table itself, so this follows whatever sensor is attached)."""
+MIN_TABLE_MARGIN = 0.002
+"""... but never closer than this (a noise-free cloud still has the table's render error)."""
 PEG_MARGIN = 0.004
 """Points within this distance of the peg's known volume are the peg itself."""
 MIN_OBJECT_POINTS = 32
@@ -36,6 +44,51 @@ def valid_world_points(xyzw: np.ndarray) -> np.ndarray:
     return x[keep, :3]
 
 
+@dataclass(frozen=True)
+class TableFit:
+    """The table's plane as the camera sees it: n . x = offset (n up), and the spread of
+    its points about that plane (the depth noise there, metres)."""
+
+    normal: np.ndarray
+    offset: float
+    sigma: float
+
+    def height(self, points: np.ndarray) -> np.ndarray:
+        return points @ self.normal - self.offset
+
+    @property
+    def margin(self) -> float:
+        """Height above the plane below which a point counts as the table."""
+        return max(TABLE_SIGMAS * self.sigma, MIN_TABLE_MARGIN)
+
+
+NOMINAL_TABLE = TableFit(np.array([0.0, 0.0, 1.0]), 0.0, 0.001)
+"""When too little of the table is in view to fit it: the nominal top, 1 mm of noise."""
+
+
+def fit_table(world: np.ndarray, min_points: int = 200) -> TableFit:
+    """Fit the table's plane to the world points near its nominal top: least squares,
+    then twice more on the points within 3 robust sigmas (objects standing on it, flying
+    pixels and the hole's walls are outliers), the sigma from the median absolute residual."""
+    band = world[np.abs(world[:, 2]) < TABLE_BAND].astype(np.float64)
+    if len(band) < min_points:
+        return NOMINAL_TABLE
+    keep = band
+    normal, offset, sigma = NOMINAL_TABLE.normal, 0.0, NOMINAL_TABLE.sigma
+    for _ in range(3):
+        if len(keep) < min_points:
+            break
+        # z = a x + b y + c, least squares
+        A = np.column_stack([keep[:, 0], keep[:, 1], np.ones(len(keep))])
+        (a, b, c), *_ = np.linalg.lstsq(A, keep[:, 2], rcond=None)
+        scale = np.sqrt(a * a + b * b + 1.0)
+        normal, offset = np.array([-a, -b, 1.0]) / scale, c / scale
+        r = band @ normal - offset
+        sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-5)
+        keep = band[np.abs(r) < 3 * sigma]
+    return TableFit(normal, float(offset), sigma)
+
+
 def world_to_tool(points: np.ndarray, tcp: np.ndarray) -> np.ndarray:
     """World points (K, 3) -> tool frame of the 4x4 tcp pose."""
     R, t = tcp[:3, :3], tcp[:3, 3]
@@ -49,10 +102,14 @@ def tool_to_world(points: np.ndarray, tcp: np.ndarray) -> np.ndarray:
 def object_points(
     xyzw: np.ndarray, tcp: np.ndarray, peg: str, keep_table: bool = False
 ) -> np.ndarray:
-    """Tool-frame points of everything but the table (unless `keep_table`) and the peg."""
+    """Tool-frame points of everything but the table (unless `keep_table`) and the peg.
+
+    The table is the plane fitted to the cloud itself (`fit_table`), with a margin of its
+    measured noise: the cloud may come from any sensor profile and calibration."""
     world = valid_world_points(xyzw)
     if not keep_table:
-        world = world[world[:, 2] > TABLE_MARGIN]
+        table = fit_table(world)
+        world = world[table.height(world) > table.margin]
     p = world_to_tool(world, tcp)
     p = p[np.linalg.norm(p, axis=1) <= MAX_RANGE]
     half = peg_half_extent(peg) + PEG_MARGIN

@@ -73,6 +73,9 @@ class CollectArgs:
     """Base seed: sample i is drawn from (seed, i)."""
     assets: tuple[str, ...] = ()
     """Extra hole-object folders or files."""
+    sensor: str = "ideal"
+    """Sensor profile the observations are taken with (sensors/<name>.yaml or a path): train
+    on the noise the agent will meet."""
 
 
 def file_attrs(args: CollectArgs, task) -> dict:
@@ -127,6 +130,7 @@ class Collector:
                 obs_mode="rgbd" if self.args.kind == "kovis" else "pointcloud",
                 objects=tuple(self.groups[group]),
                 assets=tuple(self.assets),
+                sensor=self.args.sensor,
             )
             self.group = group
         return self.env

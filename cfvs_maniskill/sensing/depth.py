@@ -82,14 +82,18 @@ def apply_stereo(
         with np.errstate(invalid="ignore"):
             out_valid &= ~(incidence_deg(points, valid) > model.max_incidence_deg)
     z_new = z.copy()
+    # Every draw is image-sized, so a pixel's noise does not depend on how many edge pixels
+    # other parts of the image have (a restored state then reproduces the same image).
+    u = rng.random(z.shape, dtype=np.float32)
+    mix = rng.random(z.shape, dtype=np.float32)
     if model.edge_dropout > 0 or model.edge_flying > 0:
         rows, cols = np.nonzero(edge_mask(z, valid, model.edge_jump))
-        u = rng.random(len(rows), dtype=np.float32)
-        drop = u < model.edge_dropout
-        fly = ~drop & (u < model.edge_dropout + model.edge_flying)
-        zmin, zmax = neighbour_range(z, valid, rows[fly], cols[fly])
-        mix = rng.random(len(zmin), dtype=np.float32)
-        z_new[rows[fly], cols[fly]] = zmin + mix * (zmax - zmin)
+        draw = u[rows, cols]
+        drop = draw < model.edge_dropout
+        fly = ~drop & (draw < model.edge_dropout + model.edge_flying)
+        r, c = rows[fly], cols[fly]
+        zmin, zmax = neighbour_range(z, valid, r, c)
+        z_new[r, c] = zmin + mix[r, c] * (zmax - zmin)
         out_valid[rows[drop], cols[drop]] = False
     fb = np.float32(model.focal_px * model.baseline)
     with np.errstate(divide="ignore", invalid="ignore"):

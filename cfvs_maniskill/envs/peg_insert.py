@@ -561,7 +561,7 @@ class PegInsertEnv(BaseEnv):
             x = xyzw[0].cpu().numpy().reshape(h, w, 4)
             T = cam["cam2world_gl"].astype(np.float32)
             local = (x[..., :3] - T[:3, 3]) @ T[:3, :3]  # world -> camera (OpenGL axes)
-            pts, ok = self.sensing.stereo_points_gl(local, x[..., 3] > 0, draw)
+            pts, ok = self.sensing.stereo_points_gl(local, x[..., 3] > 0, draw, cam["intrinsic_cv"])
             # Back to the world through the pose the robot believes the camera has.
             B = self.sensing.reported_cam2world_gl(cam["cam2world_gl"]).astype(np.float32)
             world = pts @ B[:3, :3].T + B[:3, 3]
@@ -575,7 +575,7 @@ class PegInsertEnv(BaseEnv):
                 d = data["depth"]
                 z = d[0, ..., 0].cpu().numpy().astype(np.float32) / 1000.0
                 pts = grid_points(z, cam["intrinsic_cv"])
-                new, ok = self.sensing.stereo_points_cv(pts, z > 0, draw)
+                new, ok = self.sensing.stereo_points_cv(pts, z > 0, draw, cam["intrinsic_cv"])
                 mm = np.where(ok, np.round(new[..., 2] * 1000.0), 0.0)
                 data["depth"] = torch.as_tensor(mm, dtype=d.dtype, device=d.device)[None, ..., None]
         self._misreport_camera(obs, cam, cloud=False)  # the cloud is placed already

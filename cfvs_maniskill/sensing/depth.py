@@ -33,12 +33,21 @@ def _shifted(a: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
     return out
 
 
+def _smooth_side(p: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """The tangent along one image axis, from the neighbour on the side where depth changes
+    least: at a depth discontinuity that is the pixel's own surface, not the jump."""
+    fwd = _shifted(p, -dy, -dx, np.nan) - p
+    bwd = p - _shifted(p, dy, dx, np.nan)
+    with np.errstate(invalid="ignore"):
+        use_fwd = np.isnan(bwd[..., 2]) | (np.abs(fwd[..., 2]) < np.abs(bwd[..., 2]))
+    return np.where(use_fwd[..., None], fwd, bwd)
+
+
 def incidence_deg(points: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Angle between each pixel's ray and its surface normal (from the neighbouring pixels'
     points), degrees; NaN where the neighbours needed are missing."""
     p = np.where(valid[..., None], points, np.float32(np.nan))
-    du = _shifted(p, 0, -1, np.nan) - _shifted(p, 0, 1, np.nan)
-    dv = _shifted(p, -1, 0, np.nan) - _shifted(p, 1, 0, np.nan)
+    du, dv = _smooth_side(p, 0, 1), _smooth_side(p, 1, 0)
     n = np.empty_like(du)  # du x dv, written out (np.cross is slower on small arrays)
     n[..., 0] = du[..., 1] * dv[..., 2] - du[..., 2] * dv[..., 1]
     n[..., 1] = du[..., 2] * dv[..., 0] - du[..., 0] * dv[..., 2]
@@ -49,8 +58,9 @@ def incidence_deg(points: np.ndarray, valid: np.ndarray) -> np.ndarray:
         return np.degrees(np.arccos(np.minimum(dot / norm, 1.0)))
 
 
-def edge_mask(z: np.ndarray, valid: np.ndarray, jump: float) -> np.ndarray:
-    """Valid pixels next to a depth jump larger than `jump` or to a pixel with no return."""
+def edge_mask(z: np.ndarray, valid: np.ndarray, jump) -> np.ndarray:
+    """Valid pixels next to a depth jump larger than `jump` (m, a scalar or per pixel) or
+    to a pixel with no return."""
     edge = np.zeros_like(valid)
     for dy, dx in _NEIGHBOURS:
         zn = _shifted(z, dy, dx, np.nan)
@@ -67,13 +77,25 @@ def neighbour_range(z: np.ndarray, valid: np.ndarray, rows, cols) -> tuple[np.nd
     return np.nanmin(block, axis=0), np.nanmax(block, axis=0)
 
 
+def discontinuity_jump(z: np.ndarray, model: DepthModel, pixel_angle: float) -> np.ndarray:
+    """The depth step between neighbouring pixels (m) that no returned surface makes: a
+    surface tilted by the largest incidence the sensor still returns steps by
+    z * tan(incidence) * pixel_angle; half again more than that (or `edge_jump`, if larger)
+    is a discontinuity, not an oblique surface."""
+    steepest = np.tan(np.radians(min(model.max_incidence_deg, 85.0)))
+    return np.maximum(model.edge_jump, 1.5 * z * steepest * pixel_angle)
+
+
 def apply_stereo(
     points: np.ndarray,
     valid: np.ndarray,
     model: DepthModel,
     rng: np.random.Generator,
+    pixel_angle: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(H, W, 3) camera-frame points (z forward) and their validity -> the sensor's."""
+    """(H, W, 3) camera-frame points (z forward) and their validity -> the sensor's.
+    `pixel_angle`: the angle between neighbouring pixels' rays (1 / focal length in the
+    rendered image's pixels), rad."""
     points = points.astype(np.float32)
     z = points[..., 2]
     valid = valid & (z > 0)
@@ -87,7 +109,8 @@ def apply_stereo(
     u = rng.random(z.shape, dtype=np.float32)
     mix = rng.random(z.shape, dtype=np.float32)
     if model.edge_dropout > 0 or model.edge_flying > 0:
-        rows, cols = np.nonzero(edge_mask(z, valid, model.edge_jump))
+        jump = discontinuity_jump(z, model, pixel_angle)
+        rows, cols = np.nonzero(edge_mask(z, valid, jump))
         draw = u[rows, cols]
         drop = draw < model.edge_dropout
         fly = ~drop & (draw < model.edge_dropout + model.edge_flying)

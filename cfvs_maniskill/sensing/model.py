@@ -81,15 +81,17 @@ class SensorModel:
         return np.random.default_rng([self.seed, _DEPTH, draw])
 
     def stereo_points_cv(
-        self, points: np.ndarray, valid: np.ndarray, draw: int
+        self, points: np.ndarray, valid: np.ndarray, draw: int, intrinsic: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """(H, W, 3) OpenCV camera-frame points -> the stereo sensor's (observation `draw`)."""
-        return apply_stereo(points, valid, self.profile.depth, self.depth_rng(draw))
+        """(H, W, 3) OpenCV camera-frame points -> the stereo sensor's (observation `draw`;
+        `intrinsic`: the rendered image's 3x3 camera matrix)."""
+        pixel_angle = 1.0 / float(intrinsic[0, 0])
+        return apply_stereo(points, valid, self.profile.depth, self.depth_rng(draw), pixel_angle)
 
     def stereo_points_gl(
-        self, points_gl: np.ndarray, valid: np.ndarray, draw: int
+        self, points_gl: np.ndarray, valid: np.ndarray, draw: int, intrinsic: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """As stereo_points_cv, in OpenGL camera axes."""
         flip = np.array([1.0, -1.0, -1.0], dtype=np.float32)
-        out, ok = self.stereo_points_cv(points_gl * flip, valid, draw)
+        out, ok = self.stereo_points_cv(points_gl * flip, valid, draw, intrinsic)
         return out * flip, ok

@@ -1,0 +1,127 @@
+"""No privileged data reaches an agent (issue 21): agents are built from the task's nominal
+constants, seeded from the episode seed, and see only what a robot's sensors report."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import sapien
+import torch
+
+from cfvs_maniskill.agents.base import Agent, Observation
+from cfvs_maniskill.agents.executor import Executor
+from cfvs_maniskill.agents.interface import ALLOWED_OBS, TaskSpec
+from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, AGENTS, PRIVILEGED, make_agent
+from cfvs_maniskill.envs.task_config import TaskConfig
+from cfvs_maniskill.episode import run_episode
+
+ENV_ID = "PegInsert6DoF-v1"
+FORBIDDEN_TYPES = (gym.Env, gym.Wrapper, TaskConfig, sapien.Scene, sapien.Entity)
+"""Anything an agent could read the truth from: the env (any wrapper), the task's full
+config (it lists the objects), the simulator's scene or its entities."""
+
+
+def _reachable(root, limit: int = 20000):
+    """Every object reachable from `root` through attributes, containers and dataclass
+    fields (what an agent's code could get at without importing anything)."""
+    seen, stack = set(), [root]
+    while stack and len(seen) < limit:
+        x = stack.pop()
+        if id(x) in seen or isinstance(x, str | bytes | int | float | bool | type(None)):
+            continue
+        seen.add(id(x))
+        yield x
+        if isinstance(x, np.ndarray | torch.Tensor):
+            continue
+        if isinstance(x, dict):
+            stack.extend(x.keys())
+            stack.extend(x.values())
+        elif isinstance(x, list | tuple | set | frozenset):
+            stack.extend(x)
+        if hasattr(x, "__dict__"):
+            stack.extend(vars(x).values())
+        for slot in getattr(type(x), "__slots__", ()):
+            stack.append(getattr(x, slot, None))
+        if callable(x) and getattr(x, "__closure__", None):
+            stack.extend(c.cell_contents for c in x.__closure__)
+
+
+@pytest.mark.parametrize("name", [a for a in AGENTS if a not in PRIVILEGED])
+def test_agents_cannot_reach_the_env(make_env, name):
+    env = make_env(ENV_ID, obs_mode=AGENT_OBS_MODES.get(name, "pointcloud"))
+    agent = make_agent(name, env)
+    assert not agent.privileged
+    leaks = [type(x).__name__ for x in _reachable(agent) if isinstance(x, FORBIDDEN_TYPES)]
+    assert not leaks, f"{name} can reach {sorted(set(leaks))}"
+    specs = [x for x in _reachable(agent) if isinstance(x, TaskSpec)]
+    assert specs and all(s.env_id == ENV_ID for s in specs)
+
+
+def test_only_the_oracle_is_privileged(make_env):
+    env = make_env(ENV_ID, obs_mode="state")
+    assert {"oracle"} == PRIVILEGED and make_agent("oracle", env).privileged
+    # TaskSpec has the task's nominal constants and nothing per episode.
+    names = {f.name for f in dataclasses.fields(TaskSpec)}
+    assert not names & {"objects", "hole_pose", "object", "tilt_deg", "yaw_deg", "source"}
+
+
+class Spy(Agent):
+    """Records everything handed to the agent it wraps."""
+
+    def __init__(self, inner: Agent):
+        self.inner, self.name, self.obs_mode = inner, inner.name, inner.obs_mode
+        self.max_decisions = inner.max_decisions
+        self.resets: list = []
+        self.seen: list[Observation] = []
+
+    def reset(self, seed):
+        self.resets.append(seed)
+        self.inner.reset(seed)
+
+    def act(self, observation):
+        self.seen.append(observation)
+        return self.inner.act(observation)
+
+
+def _keys(d: dict, prefix: str = "") -> set[str]:
+    out = set()
+    for k, v in d.items():
+        out |= _keys(v, f"{prefix}{k}/") if isinstance(v, dict) else {prefix + k}
+    return out
+
+
+@pytest.mark.parametrize("name", ["cfvs", "kovis"])
+def test_agents_are_handed_only_what_a_robot_has(make_env, name):
+    """Through a whole episode: reset gets the episode seed (an int) and nothing else; each
+    observation holds only the wrist camera's cloud or images (no segmentation, no true
+    poses, no sensor extrinsics), the tcp pose, joint angles and the wrist wrench."""
+    env = make_env(ENV_ID, obs_mode=AGENT_OBS_MODES.get(name, "pointcloud"), sensor="realistic")
+    spy = Spy(make_agent(name, env))
+    run_episode(env, spy, Executor(env), seed=21)
+    assert spy.resets == [21] and type(spy.resets[0]) is int
+    assert spy.seen
+    allowed = {f"pointcloud/{k}" for k in ALLOWED_OBS["pointcloud"]} | {
+        f"sensor_data/wrist_camera/{k}" for k in ALLOWED_OBS["sensor_data"]
+    }
+    for o in spy.seen:
+        assert {f.name for f in dataclasses.fields(o)} == {"obs", "tcp_pose", "qpos", "wrench"}
+        keys = _keys(o.obs)
+        assert keys and keys <= allowed, keys - allowed
+        assert o.tcp_pose.shape == (4, 4) and o.qpos.shape == (6,) and o.wrench.shape == (6,)
+
+
+def test_an_agents_randomness_follows_the_episode_seed(make_env):
+    """Same seed, same episode; CFVS draws its point subsets from the episode seed (not from
+    the scene it should not know)."""
+    env = make_env(ENV_ID, obs_mode="pointcloud")
+    agent, ex = make_agent("cfvs", env), Executor(env)
+    a = run_episode(env, agent, ex, seed=33)
+    b = run_episode(env, agent, ex, seed=33)
+    assert (a.success, a.steps, a.lateral_offset_m) == (b.success, b.steps, b.lateral_offset_m)
+    agent.reset(33)
+    first = agent.rng.random()
+    agent.reset(33)
+    assert agent.rng.random() == first

@@ -274,3 +274,47 @@ def test_named_object_is_skipped_for_tasks_its_peg_does_not_fit(tmp_path):
                 "tri_only_square", "--assets", str(tmp_path), "--out", str(tmp_path / "o"))  # fmt: skip
     assert r.returncode == 2
     assert "tri_only_square" in r.stderr and "fits none of the tasks" in r.stderr
+
+
+def test_report_puts_sensor_profiles_side_by_side(reference, tmp_path):
+    """Records of two sensor profiles: the paper's tables use the ideal ones only; the
+    per-profile table and summary.md show both, side by side, the paper's beside."""
+    results = _results_folder(reference, tmp_path)
+    real = [
+        {**r, "key": r["key"] + "|realistic", "sensor": "realistic", "success": False}
+        for r in reference.values()
+    ]
+    with open(results / "eval" / "episodes.jsonl", "a") as f:
+        f.write("".join(json.dumps(r) + "\n" for r in real))
+    out = tmp_path / "report"
+    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--no-videos")
+    assert r.returncode == 0, r.stderr[-2000:]
+    text = (out / "README.md").read_text()
+    table_ii = text.split("## Table II")[1].split("##")[0]
+    assert "(n=6)" in next(x for x in table_ii.splitlines() if x.startswith("| icp |"))
+    per_sensor = text.split("## Success per sensor profile")[1].split("## Table III")[0]
+    assert "ideal 15 cm" in per_sensor and "realistic 15 cm" in per_sensor
+    oracle = next(x for x in per_sensor.splitlines() if x.startswith("| oracle |"))
+    assert "1.00 [" in oracle and "0.00 [" in oracle  # ideal beside realistic
+    summary = (out / "summary.md").read_text()
+    icp = next(x for x in summary.splitlines() if x.startswith("| icp | 3-DoF |"))
+    assert "0/6 = 0.00" in icp and icp.rstrip().endswith("0.10 / 0.10 |")
+
+
+@pytest.mark.slow
+def test_eval_runs_a_grid_of_sensor_profiles(tmp_path):
+    """--sensors is a grid dimension: one record per profile on the same scene, each
+    carrying its profile; a rerun adds nothing."""
+    args = [
+        "cfvs_maniskill.eval", "--tasks", "PegInsert3DoF", "--agents", "oracle",
+        "--objects", "cylinder", "--init-errors", "small", "--episodes-per-object", "1",
+        "--sensors", "ideal", "realistic", "--workers", "1", "--out", str(tmp_path),
+    ]  # fmt: skip
+    r = run_cli(*args)
+    assert r.returncode == 0, r.stderr[-2000:]
+    recs = [json.loads(x) for x in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    assert sorted(x["sensor"] for x in recs) == ["ideal", "realistic"]
+    assert len({x["seed"] for x in recs}) == 1 and len({x["key"] for x in recs}) == 2
+    assert "| realistic |" in (tmp_path / "summary.md").read_text()
+    r = run_cli(*args)
+    assert r.returncode == 0 and "0 to run" in r.stdout

@@ -56,7 +56,9 @@ class PegInsertEnv(BaseEnv):
       centre, within `init_cone_deg` of the hole axis, pointing at the hole +- init_aim_deg,
       rolled +- init_roll_deg. A scene is resampled until inverse kinematics reaches the
       start, the pre-insertion and the fully inserted pose, so every scene is solvable.
-    - point-cloud / depth noise N(0, depth_noise_std^2) per point (paper: 1 mm).
+    - the sensors, by the `sensor` profile (`sensors/<name>.yaml`; default `ideal`, the
+      paper's N(0, 1 mm^2) per point; `realistic`: a stereo depth camera's errors, a
+      hand-eye calibration error, a noisy wrist force/torque sensor; docs/sensing.md).
 
     **Success Conditions:**
     From true poses, in the hole's frame: the peg tip is within 5 mm of the hole's bottom,
@@ -66,7 +68,9 @@ class PegInsertEnv(BaseEnv):
     Observations: `state` (robot qpos/qvel, tcp pose, true hole pose), `rgbd`, `pointcloud`.
     The point cloud (`obs["pointcloud"]["xyzw"]`, shape (1, H*W, 4)) is the wrist camera's
     depth back-projected into the **world frame**, metres, with w = 0 for pixels that saw
-    nothing (the far plane); noise is added to xyz.
+    nothing (the far plane), as the sensor profile reports it. `wrist_wrench()` is the
+    wrist force/torque sensor. Agents see only a `robot_view` of all this
+    (agents/interface.py); the true hole pose in `state` is for the oracle and for training.
     """
 
     task: TaskConfig  # set on each registered subclass
@@ -315,9 +319,6 @@ class PegInsertEnv(BaseEnv):
         qt = torch.as_tensor(q0, dtype=torch.float32)[None]
         self.agent.reset(qt)
         self.episode_info = self._describe_episode()
-        # The sampled (float64) pose: the CFVS agent's generator is seeded from it, and the
-        # committed results were measured so.
-        self.episode_info["hole_pose"] = H.tolist()
 
     def _describe_episode(self) -> dict[str, Any]:
         H = self.hole_pose

@@ -68,6 +68,11 @@ def main(args: ReportArgs) -> int:
         ]
     )
     (args.out / "README.md").write_text(text + "\n")
+    (args.out / "summary.md").write_text(
+        f"# Success per agent, task and sensor profile ({len(records)} episodes)\n\n"
+        + tables.table_compact(records)
+        + "\n"
+    )
     print(f"wrote {args.out / 'README.md'} and {len(pngs)} plots ({len(records)} episodes)")
     return 0
 

@@ -92,6 +92,32 @@ def table_sensors(records: list[dict]) -> str:
     return "\n".join(out)
 
 
+def table_compact(records: list[dict]) -> str:
+    """One row per agent and task: success k/n at 15 / 30 cm per sensor profile, the
+    paper's beside (the README's results table)."""
+    sensors = sorted({r["sensor"] for r in records}, key=lambda s: (s != "ideal", s))
+    head = " | ".join(f"{s} 15 / 30 cm" for s in sensors)
+    out = [
+        f"| agent | task | {head} | paper 15 / 30 cm |",
+        "|---|---|" + "---|" * len(sensors) + "---|",
+    ]
+    for label in sorted({r["label"] for r in records}, key=lambda x: (x != "oracle", x)):
+        for task in sorted({r["task"] for r in records if r["label"] == label}):
+            recs = [r for r in records if r["task"] == task and r["label"] == label]
+            cells = []
+            for s in sensors:
+                parts = []
+                for i in INITS:
+                    m = [r for r in recs if r["sensor"] == s and r["init"] == i]
+                    k = sum(r["success"] for r in m)
+                    parts.append(f"{k}/{len(m)} = {k / len(m):.2f}" if m else "-")
+                cells.append(" / ".join(parts))
+            ref = paper.TABLE_II.get(_dof(task), {}).get(label.removesuffix("_plain"))
+            pav = f"{ref[0][0]:.2f} / {ref[0][1]:.2f}" if ref else "-"
+            out.append(f"| {label} | {_dof(task)}-DoF | " + " | ".join(cells) + f" | {pav} |")
+    return "\n".join(out)
+
+
 def table_iii(records: list[dict]) -> str:
     """3-DoF servo time of successful episodes, per agent."""
     out = [

@@ -22,7 +22,7 @@ class Video:
 
 
 def pick(records: list[dict]) -> list[dict]:
-    """First success and first failure per (task, label) in file order. Variants named
+    """First success and first failure per (task, label, sensor) in file order. Variants named
     only by their folder (e.g. results/cfvs_plain from the run command) are skipped: their
     executor settings are not in the record, so a replay could not match."""
     chosen: dict[tuple, dict] = {}
@@ -30,13 +30,15 @@ def pick(records: list[dict]) -> list[dict]:
     for r in sorted(records, key=lambda r: "key" not in r):
         if r["label"] != r["agent"] and "search_radius_m" not in r:
             continue
-        chosen.setdefault((r["task"], r["label"], bool(r["success"])), r)
-    return [chosen[k] for k in sorted(chosen, key=lambda k: (k[0], k[1], not k[2]))]
+        sensor = r.get("sensor", "ideal")
+        chosen.setdefault((r["task"], r["label"], sensor, bool(r["success"])), r)
+    return [chosen[k] for k in sorted(chosen, key=lambda k: (k[0], k[1], k[2], not k[3]))]
 
 
 def video_name(rec: dict) -> str:
     outcome = "success" if rec["success"] else "failure"
-    return f"{rec['task']}_{rec['label']}_{outcome}"
+    sensor = rec.get("sensor", "ideal")
+    return f"{rec['task']}_{rec['label']}_{outcome}" + ("" if sensor == "ideal" else f"_{sensor}")
 
 
 def render(
@@ -54,7 +56,7 @@ def render(
     from cfvs_maniskill.episode import run_episode
 
     out.mkdir(parents=True, exist_ok=True)
-    envs: dict[tuple[str, str], RecordEpisode] = {}
+    envs: dict[tuple[str, str, str], RecordEpisode] = {}
     objects: dict[str, set[str]] = {}
     for r in picks:
         objects.setdefault(r["task"], set()).add(r["object"])
@@ -67,11 +69,13 @@ def render(
             videos.append(Video(rec, path, ok == "success", reason.strip()))
             continue
         obs_mode = AGENT_OBS_MODES.get(rec["agent"], "pointcloud")
-        key = (rec["task"], obs_mode)
+        sensor = rec.get("sensor", "ideal")
+        key = (rec["task"], obs_mode, sensor)
         if key not in envs:
             env = gym.make(
                 f"{rec['task']}-v1",
                 obs_mode=obs_mode,
+                sensor=sensor,
                 objects=sorted(objects[rec["task"]]),
                 assets=[str(a) for a in assets],
                 render_mode="rgb_array",
@@ -110,8 +114,8 @@ def markdown(videos: list[Video], base: Path) -> str:
     if not videos:
         return "No episodes to show."
     lines = [
-        "| task | agent | recorded | object | seed | video | replayed |",
-        "|---|---|---|---|---|---|---|",
+        "| task | agent | sensor | recorded | object | seed | video | replayed |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for v in videos:
         r = v.record
@@ -121,7 +125,8 @@ def markdown(videos: list[Video], base: Path) -> str:
             link = f"[{v.path.name}]({v.path.relative_to(base)})"
             replay = "success" if v.replay_success else f"failure ({v.replay_reason})"
         lines.append(
-            f"| {r['task']} | {r['label']} | {v.recorded} | {r['object']} | {r['seed']} | "
+            f"| {r['task']} | {r['label']} | {r.get('sensor', 'ideal')} | {v.recorded} | "
+            f"{r['object']} | {r['seed']} | "
             f"{link} | {replay} |"
         )
     return "\n".join(lines)

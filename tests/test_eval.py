@@ -290,9 +290,9 @@ def test_report_puts_sensor_profiles_side_by_side(reference, tmp_path):
     r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--no-videos")
     assert r.returncode == 0, r.stderr[-2000:]
     text = (out / "README.md").read_text()
-    table_ii = text.split("## Table II")[1].split("##")[0]
+    table_ii = text.split("## Table II")[1].split("\n## ")[0]
     assert "(n=6)" in next(x for x in table_ii.splitlines() if x.startswith("| icp |"))
-    per_sensor = text.split("## Success per sensor profile")[1].split("## Table III")[0]
+    per_sensor = text.split("## Success per sensor profile")[1].split("\n## ")[0]
     assert "ideal 15 cm" in per_sensor and "realistic 15 cm" in per_sensor
     oracle = next(x for x in per_sensor.splitlines() if x.startswith("| oracle |"))
     assert "1.00 [" in oracle and "0.00 [" in oracle  # ideal beside realistic

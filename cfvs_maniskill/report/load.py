@@ -20,7 +20,7 @@ def load_records(root: Path) -> list[dict]:
     that agent, e.g. results/cfvs_plain) and `init` (small / large).
 
     Records on objects outside the default library (extra `--assets`, e.g. the CAD parts in
-    results/cad_parts) are left out: the paper's tables are about its test objects.
+    results/cad_parts_v2) are left out: the paper's tables are about its test objects.
     """
     known = set(load_library().specs)
     out, other = [], 0

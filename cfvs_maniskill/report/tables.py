@@ -64,6 +64,15 @@ def table_ii(records: list[dict]) -> str:
     return "\n".join(out)
 
 
+def _paper_row(task: str, label: str):
+    """The paper's Table II row for an agent on one of its three tasks (None for tasks the
+    paper has not, e.g. tight fits; `_plain` labels are the paper's protocol itself)."""
+    dof = _dof(task)
+    if task != f"PegInsert{dof}DoF":
+        return None
+    return paper.TABLE_II.get(dof, {}).get(label.removesuffix("_plain"))
+
+
 def table_sensors(records: list[dict]) -> str:
     """Per task: each agent's success at 15 / 30 cm under every sensor profile in the
     results, side by side, with the paper's (its protocol is the `ideal` profile)."""
@@ -71,7 +80,6 @@ def table_sensors(records: list[dict]) -> str:
     head = " | ".join(f"{s} {d}" for s in sensors for d in ("15 cm", "30 cm"))
     out = []
     for task in sorted({r["task"] for r in records}):
-        dof = _dof(task)
         out += [
             f"### {task}: success per sensor profile, ours [95% Wilson] (paper: ideal sensor)",
             "",
@@ -85,7 +93,7 @@ def table_sensors(records: list[dict]) -> str:
                 for s in sensors
                 for i in INITS
             ]
-            ref = paper.TABLE_II.get(dof, {}).get(label.removesuffix("_plain"))
+            ref = _paper_row(task, label)
             pav = [f"{ref[0][j]:.2f}" if ref else "-" for j in range(2)]
             out.append(f"| {label} | " + " | ".join(cells) + f" | {pav[0]} | {pav[1]} |")
         out.append("")
@@ -112,9 +120,11 @@ def table_compact(records: list[dict]) -> str:
                     k = sum(r["success"] for r in m)
                     parts.append(f"{k}/{len(m)} = {k / len(m):.2f}" if m else "-")
                 cells.append(" / ".join(parts))
-            ref = paper.TABLE_II.get(_dof(task), {}).get(label.removesuffix("_plain"))
+            ref = _paper_row(task, label)
             pav = f"{ref[0][0]:.2f} / {ref[0][1]:.2f}" if ref else "-"
-            out.append(f"| {label} | {_dof(task)}-DoF | " + " | ".join(cells) + f" | {pav} |")
+            dof = _dof(task)
+            name = f"{dof}-DoF" if task == f"PegInsert{dof}DoF" else task  # e.g. tight fits
+            out.append(f"| {label} | {name} | " + " | ".join(cells) + f" | {pav} |")
     return "\n".join(out)
 
 

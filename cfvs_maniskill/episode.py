@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -34,6 +34,9 @@ class EpisodeResult:
     wall_time_s: float
     sensor: str = "ideal"
     """The sensor profile the episode ran under."""
+    move_residuals: list = field(default_factory=list)
+    """After each of the agent's moves, the true error from the pre-insertion pose:
+    [lateral mm, tilt deg] (measured by the runner from true poses; agents never see it)."""
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -51,6 +54,17 @@ def failure_reason(m: dict, depth: float) -> str:
             return f"peg stopped on the rim ({1000 * m['lateral_offset']:.1f} mm off the axis)"
         return f"peg missed the hole ({1000 * m['lateral_offset']:.0f} mm off the axis)"
     return f"peg stuck {1000 * m['tip_to_bottom']:.1f} mm above the hole's bottom"
+
+
+def pose_residual(u) -> list[float]:
+    """[lateral mm, tilt deg]: how far the peg tip is from the hole's axis and how far the
+    peg's axis is from it (the pre-insertion pose has both at zero), from true poses."""
+    H, T = u.hole_pose, u.tcp_matrix()
+    z = H[:3, 2]
+    d = T[:3, 3] - H[:3, 3]
+    lateral = float(np.linalg.norm(d - (d @ z) * z))
+    tilt = float(np.degrees(np.arccos(np.clip(-T[:3, 2] @ z, -1.0, 1.0))))
+    return [round(1000 * lateral, 2), round(tilt, 2)]
 
 
 def observe(env, obs) -> Observation:
@@ -73,6 +87,7 @@ def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict 
     executor.reset()
     reason = ""
     inserted = False
+    residuals: list[list[float]] = []
     try:
         for _ in range(agent.max_decisions):
             action = agent.act(observe(env, obs))
@@ -89,6 +104,7 @@ def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict 
                 reason = "agent returned a non-finite pose"
                 break
             res = executor.move_to(action.pose)
+            residuals.append(pose_residual(u))
             if not res.ok:
                 reason = res.reason
                 break
@@ -117,4 +133,5 @@ def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict 
         lateral_offset_m=round(clean["lateral_offset"], 5),
         wall_time_s=round(time.perf_counter() - t0, 3),
         sensor=u.sensor_profile.name,
+        move_residuals=residuals,
     )

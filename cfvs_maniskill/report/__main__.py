@@ -27,7 +27,7 @@ class ReportArgs:
 
 
 def main(args: ReportArgs) -> int:
-    from cfvs_maniskill.report import plots, tables, videos
+    from cfvs_maniskill.report import plots, residuals, tables, videos
     from cfvs_maniskill.report.load import load_records
 
     if not args.results.is_dir():
@@ -43,6 +43,9 @@ def main(args: ReportArgs) -> int:
         plots.success_vs_tilt(records, args.out),
         plots.servo_times(records, args.out),
     ]
+    residual_png = residuals.plot(records, args.out)
+    if residual_png is not None:
+        pngs.append(residual_png)
     if args.videos:
         shown = videos.render(videos.pick(records), args.out / "videos", args.assets)
         video_md = videos.markdown(shown, args.out)
@@ -61,6 +64,8 @@ def main(args: ReportArgs) -> int:
             tables.table_iii(ideal),
             "## Table IV: ablation (6-DoF, ideal sensor)",
             tables.table_iv(ideal),
+            "## Closed-loop residual: true error from the pre-insertion pose after each move",
+            residuals.table(records),
             "## Plots",
             "\n".join(f"![{p.stem}]({p.name})" for p in pngs),
             "## Videos: first success and first failure per agent and task",

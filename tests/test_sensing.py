@@ -13,9 +13,9 @@ from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
 from cfvs_maniskill.constants import SENSORS_DIR
 from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
-from cfvs_maniskill.robots.ur5 import CAMERA_UID
+from cfvs_maniskill.robots.ur5 import CAMERA_UID, camera_pose_in_tool
 from cfvs_maniskill.sensing.depth import apply_stereo, discontinuity_jump, edge_mask, grid_points
-from cfvs_maniskill.sensing.model import mount_error
+from cfvs_maniskill.sensing.model import SAPIEN_CAM_TO_GL, mount_error
 from cfvs_maniskill.sensing.profile import (
     SensorProfileError,
     available_profiles,
@@ -150,6 +150,8 @@ def test_hand_eye_error_moves_the_cloud_rigidly_by_the_stated_amount(make_env, t
     assert np.isclose(np.linalg.norm(told[:3, 3] - true_cam[:3, 3]), 0.0015, atol=2e-5)
     assert np.isclose(np.degrees(G.rot_angle(off[:3, :3])), 0.5, atol=0.01)
     # The believed camera is where the nominal mount puts it (forward kinematics).
+    nominal = u.flange_matrix() @ G.to_matrix(camera_pose_in_tool()) @ SAPIEN_CAM_TO_GL
+    np.testing.assert_allclose(told, nominal, atol=1e-5)
     x = obs["pointcloud"]["xyzw"][0].numpy().astype(np.float64)
     pts = x[x[:, 3] > 0, :3]
     M = told @ G.inv(true_cam.astype(np.float64))  # true world -> reported world

@@ -37,8 +37,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
+from cfvs_maniskill.agents.interface import flange_pose
 from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
-from cfvs_maniskill.constants import PEG_LENGTH
 
 
 @dataclass
@@ -138,8 +138,7 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
         if executor.steps - steps0 >= fcfg.max_steps:
             return executor.steps - steps0, "insertion timed out"
         tcp = env.tcp_matrix()  # forward kinematics
-        flange = tcp.copy()
-        flange[:3, 3] -= PEG_LENGTH * tcp[:3, 2]  # the peg's nominal length
+        flange = flange_pose(tcp)  # the peg's nominal length back along the axis
         force, moment = tip_wrench(env.wrist_wrench() - tare, flange, tcp[:3, 3])
         if contact_at is None and np.linalg.norm(force) > fcfg.contact_force:
             contact_at = history[-1]

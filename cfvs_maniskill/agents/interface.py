@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from cfvs_maniskill import geometry as G
+from cfvs_maniskill.constants import PEG_LENGTH
 
 
 @dataclass(frozen=True)
@@ -77,3 +78,11 @@ def insertion_pose(peg: str, hole: np.ndarray, depth: float, ref: np.ndarray) ->
         cands = [hole[:3, 0], hole[:3, 1], -hole[:3, 0], -hole[:3, 1]]
         x_hint = max(cands, key=lambda c: float(c @ x_hint))
     return G.make(G.frame_with_z(z, x_hint), hole[:3, 3] + depth * z)
+
+
+def flange_pose(tcp: np.ndarray) -> np.ndarray:
+    """The flange's (tool0's) 4x4 pose from the peg tip frame's: PEG_LENGTH back along the
+    tool axis (the peg is rigid on the flange, same axes)."""
+    T = np.array(tcp, dtype=np.float64, copy=True)
+    T[:3, 3] -= PEG_LENGTH * T[:3, 2]
+    return T

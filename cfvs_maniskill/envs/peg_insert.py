@@ -15,8 +15,8 @@ from mani_skill.utils.structs.types import SceneConfig, SimConfig
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.interface import insertion_pose
-from cfvs_maniskill.constants import PEG_LENGTH, hole_half_extent, peg_half_extent
+from cfvs_maniskill.agents.interface import flange_pose, insertion_pose
+from cfvs_maniskill.constants import hole_half_extent, peg_half_extent
 from cfvs_maniskill.envs.task_config import TaskConfig, load_tasks
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
@@ -212,14 +212,13 @@ class PegInsertEnv(BaseEnv):
 
     def flange_matrix(self) -> np.ndarray:
         """True world pose of the flange (tool0): the tcp frame PEG_LENGTH back along z."""
-        T = self.tcp_matrix()
-        T[:3, 3] -= PEG_LENGTH * T[:3, 2]
-        return T
+        return flange_pose(self.tcp_matrix())
 
-    def contact_wrench(self) -> tuple[np.ndarray, np.ndarray]:
+    def contact_wrench(self, flange: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Ground truth (tests only): the summed wrench of all the peg's contacts in the last
-        physics step, world frame: force (N) and its moment (N m) about the flange."""
-        origin = self.flange_matrix()[:3, 3]
+        physics step, world frame: force (N) and its moment (N m) about the flange (its pose
+        `flange`, default the current one)."""
+        origin = (self.flange_matrix() if flange is None else flange)[:3, 3]
         force, moment = np.zeros(3), np.zeros(3)
         peg = self.agent.robot.links_map["peg"]._objs[0].entity
         rate = self.sim_freq  # PhysX reports impulses over one physics step
@@ -240,8 +239,9 @@ class PegInsertEnv(BaseEnv):
         (one sample per control step, as a sensor polled at the control rate). The peg's
         own weight is tared out, as a real cell does before inserting. Nothing per contact
         is exposed: a real sensor sums them."""
-        force, moment = self.contact_wrench()
-        R = self.flange_matrix()[:3, :3]
+        flange = self.flange_matrix()
+        force, moment = self.contact_wrench(flange)
+        R = flange[:3, :3]
         wrench = np.concatenate([R.T @ force, R.T @ moment])
         return wrench + self.sensing.wrench_error(int(self.elapsed_steps[0]))
 

@@ -65,7 +65,6 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
             _fail(f"unknown agent '{a}'; valid: {', '.join(AGENTS)}")
     if args.episodes_per_object < 1:
         _fail(f"--episodes-per-object must be >= 1, got {args.episodes_per_object}")
-    sensor_files(args.sensors)
     lib = load_library([str(a) for a in args.assets])
     out: dict[str, list[str]] = {}
     hosted: dict[str, list[str]] = {}  # named object -> tasks that can use it

@@ -1,4 +1,4 @@
-"""Train OAKN or OPN on CPU: `python -m cfvs_maniskill.train --net oakn|opn --data FILE`.
+"""Train OAKN or OPN on CPU: `python -m cfvs_maniskill.train --net oakn|opn --data FILE...`.
 
 Resumable: the full training state is saved after every epoch to OUT.resume; a restarted
 run with the same arguments continues from the last finished epoch. At the end OUT holds
@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data.augment import AugmentConfig, augment
-from cfvs_maniskill.data.store import DatasetError, load
+from cfvs_maniskill.data.store import DatasetError, load_sets
 from cfvs_maniskill.nets.checkpoint import build, file_sha256, save_atomic, write_weights
 from cfvs_maniskill.nets.oakn import OAKNConfig, oakn_loss, weighted_keypoints
 from cfvs_maniskill.nets.opn import OPNConfig, opn_loss
@@ -36,8 +36,10 @@ class TrainArgs:
     net: str = "oakn"
     """oakn (coarse keypoints), opnv (fine stage by keypoint voting, shipped) or opn (the
     paper's fine stage: global feature -> offsets)."""
-    data: Path = Path("data/coarse.h5")
-    """Dataset file from `python -m cfvs_maniskill.data collect`."""
+    data: tuple[Path, ...] = (Path("data/coarse.h5"),)
+    """Dataset file(s) from `python -m cfvs_maniskill.data collect`, one kind and peg; several
+    (e.g. the same task collected with different `--sensor` profiles) are trained on as one
+    set, each file's tail held out for validation."""
     out: Path = Path("agents/cfvs/oakn.pt")
     """Weights file to write."""
     epochs: int = 12
@@ -168,21 +170,16 @@ def train(args: TrainArgs) -> dict:
         torch.set_num_threads(args.threads)
     kind = "coarse" if args.net == "oakn" else "fine"
     fields = ("points", "keypoints") if args.net == "oakn" else ("points", "action")
-    attrs, data = load(args.data, fields)
+    sets = load_sets(args.data, fields, kind, args.net, args.val_fraction)
+    data, attrs = sets.data, sets.attrs[0]
     if args.net == "opnv":
         # Keypoints of the pre-insertion target, k2 encoded for the square's symmetry.
         data["keypoints"] = np.stack(
             [L.encode_symmetric_x(L.fine_keypoints(a)) for a in data["action"]]
         )
-    if attrs.get("kind") != kind:
-        raise DatasetError(
-            f"{args.data}: field 'kind': {args.net} trains on a {kind} dataset, "
-            f"this file is {attrs.get('kind')}"
-        )
-    sha = file_sha256(args.data)
-    m = len(data["points"])
-    n_val = max(1, int(m * args.val_fraction))
-    train_idx, val_idx = np.arange(m - n_val), np.arange(m - n_val, m)
+    data_record = sets.record(file_sha256)
+    sha = data_record["data_sha256"]
+    train_idx, val_idx = sets.train_idx, sets.val_idx
     n_points = _points_default(args)
     net_cfg = {"oakn": OAKNConfig(), "opnv": OPNV_CONFIG, "opn": OPNConfig()}[args.net]
     batches = Batches(
@@ -263,9 +260,7 @@ def train(args: TrainArgs) -> dict:
         "peg": attrs["peg"],
         "config": dataclasses.asdict(net_cfg),
         "points": n_points,
-        "data": str(args.data),
-        "data_sha256": sha,
-        "data_samples": m,
+        **data_record,
     }
     write_weights(
         args.out, model, meta, "cfvs_maniskill.train", args, state["history"], state["wall_s"]

@@ -20,7 +20,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from cfvs_maniskill.data.images import DEPTH_RANGE
-from cfvs_maniskill.data.store import DatasetError, load
+from cfvs_maniskill.data.store import DatasetError, load_sets
 from cfvs_maniskill.nets.checkpoint import file_sha256, write_weights
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig, kovis_loss, motion_targets
 from cfvs_maniskill.train import cli_main, update
@@ -56,32 +56,6 @@ def depth_target(depth: np.ndarray) -> torch.Tensor:
     return (d - DEPTH_RANGE[0]) / (DEPTH_RANGE[1] - DEPTH_RANGE[0])
 
 
-def load_sets(files: tuple[Path, ...]) -> tuple[dict, dict, list[str]]:
-    """Concatenated train / validation arrays and the files' sha256."""
-    train: dict[str, list] = {"gray": [], "depth": [], "action": []}
-    val: dict[str, list] = {"gray": [], "depth": [], "action": []}
-    pegs, shas = set(), []
-    for f in files:
-        attrs, d = load(f, ("gray", "depth", "action"))
-        if attrs.get("kind") != "kovis":
-            raise DatasetError(
-                f"{f}: field 'kind': KOVIS trains on a kovis dataset, this file is "
-                f"{attrs.get('kind')}"
-            )
-        pegs.add(attrs["peg"])
-        m = len(d["action"])
-        n_val = max(1, int(0.05 * m))
-        for k in train:
-            train[k].append(d[k][: m - n_val])
-            val[k].append(d[k][m - n_val :])
-        shas.append(file_sha256(f))
-    if len(pegs) != 1:
-        raise DatasetError(f"--data: files for different pegs ({', '.join(sorted(pegs))})")
-    cat = {k: np.concatenate(v) for k, v in train.items()}
-    vcat = {k: np.concatenate(v) for k, v in val.items()}
-    return cat | {"peg": pegs.pop()}, vcat, shas
-
-
 @torch.no_grad()
 def validate(model: KOVIS, val: dict) -> dict[str, float]:
     model.eval()
@@ -114,7 +88,9 @@ def train(args: TrainKOVISArgs) -> dict:
         raise DatasetError(f"--dof: expected 3, 4 or 6, got {args.dof}")
     if args.threads:
         torch.set_num_threads(args.threads)
-    data, val, shas = load_sets(args.data)
+    sets = load_sets(args.data, ("gray", "depth", "action"), "kovis", "KOVIS")
+    val = {k: v[sets.val_idx] for k, v in sets.data.items()}
+    data = {k: v[sets.train_idx] for k, v in sets.data.items()}
     cfg = KOVISConfig(motion_dims=args.dof)
     torch.manual_seed(args.seed)
     model = KOVIS(cfg)
@@ -144,11 +120,9 @@ def train(args: TrainKOVISArgs) -> dict:
     meta = {
         "net": "kovis",
         "task": ",".join(str(p) for p in args.data),
-        "peg": data["peg"],
+        "peg": sets.peg,
         "config": dataclasses.asdict(cfg),
-        "data": [str(p) for p in args.data],
-        "data_sha256": shas,
-        "data_samples": m + len(val["action"]),
+        **sets.record(file_sha256),
     }
     meta = write_weights(args.out, model, meta, "cfvs_maniskill.train_kovis", args, history, wall)
     return meta

@@ -4,6 +4,7 @@ crash-safe resumable files, the picture."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -199,7 +200,7 @@ def test_training_writes_weights_that_load(coarse_file, kovis_file, tmp_path):
     from cfvs_maniskill.train_kovis import train as train_kovis
 
     out = tmp_path / "oakn.pt"
-    train_cfvs(TrainArgs(net="oakn", data=coarse_file, out=out, epochs=1, batch=4, points=128))
+    train_cfvs(TrainArgs(net="oakn", data=(coarse_file,), out=out, epochs=1, batch=4, points=128))
     _, meta = load_weights(out, "oakn", "square")
     assert meta["command"].startswith("python -m cfvs_maniskill.train")
     assert out.with_suffix(".json").is_file()
@@ -207,3 +208,32 @@ def test_training_writes_weights_that_load(coarse_file, kovis_file, tmp_path):
     train_kovis(TrainKOVISArgs(data=(kovis_file,), out=out, dof=4, epochs=1, batch=4))
     net, meta = load_weights(out, "kovis", "square")
     assert net.cfg.motion_dims == 4 and "direction_err_deg_mean" in meta["validation"]
+
+
+def test_training_on_several_files_holds_out_each_and_records_them(coarse_file, tmp_path):
+    """`train --data A B`: one set, each file's tail in validation, every file recorded;
+    files for another peg are refused naming the file and the field."""
+    from cfvs_maniskill.data.store import load_sets
+    from cfvs_maniskill.nets.checkpoint import file_sha256, load_weights
+    from cfvs_maniskill.train import TrainArgs
+    from cfvs_maniskill.train import train as train_cfvs
+
+    other = tmp_path / "other.h5"
+    shutil.copy(coarse_file, other)
+    sets = load_sets((coarse_file, other), ("points",), "coarse", "oakn")
+    m = len(load(coarse_file, ("points",))[1]["points"])
+    assert len(sets.data["points"]) == 2 * m
+    assert (sets.val_idx < m).any() and (sets.val_idx >= m).any()
+    assert not set(sets.val_idx) & set(sets.train_idx)
+    out = tmp_path / "oakn.pt"
+    train_cfvs(
+        TrainArgs(net="oakn", data=(coarse_file, other), out=out, epochs=1, batch=4, points=128)
+    )
+    _, meta = load_weights(out, "oakn", "square")
+    assert [f["path"] for f in meta["data_files"]] == [str(coarse_file), str(other)]
+    assert meta["data_sha256"] == [file_sha256(coarse_file), file_sha256(other)]
+    assert meta["data_samples"] == 2 * m
+    with h5py.File(other, "a") as f:
+        f.attrs["peg"] = "round"
+    with pytest.raises(DatasetError, match=r"other\.h5: field 'peg'"):
+        load_sets((coarse_file, other), ("points",), "coarse", "oakn")

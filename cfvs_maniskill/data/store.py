@@ -34,6 +34,7 @@ import json
 import os
 import shutil
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -230,3 +231,87 @@ def load(path: Path | str, fields: tuple[str, ...] | None = None) -> tuple[dict,
     except OSError as e:
         raise DatasetError(f"{path}: not a readable HDF5 dataset ({e})") from e
     return attrs, data
+
+
+@dataclass
+class TrainingSets:
+    """Several dataset files of one kind and peg as one training set: the arrays
+    concatenated, each file's last `val_fraction` of samples held out for validation (so
+    the validation set has every file, e.g. every sensor profile, in its share)."""
+
+    data: dict[str, np.ndarray]
+    train_idx: np.ndarray
+    val_idx: np.ndarray
+    attrs: list[dict]
+    """Each file's attrs, in --data order."""
+    files: list[Path]
+    sizes: list[int]
+    """Samples per file."""
+
+    @property
+    def peg(self) -> str:
+        return self.attrs[0]["peg"]
+
+    def record(self, sha256) -> dict:
+        """What a weights file records about its data: one entry per file (path, sha256,
+        samples, sensor profile, seed) plus the single-file fields older records have."""
+        per_file = [
+            {
+                "path": str(f),
+                "sha256": sha256(f),
+                "samples": int(n),
+                "sensor": json.loads(a.get("config", "{}")).get("sensor", "ideal"),
+                "seed": int(a.get("seed", 0)),
+            }
+            for f, a, n in zip(self.files, self.attrs, self.sizes, strict=True)
+        ]
+        one = len(per_file) == 1
+        return {
+            "data": per_file[0]["path"] if one else [p["path"] for p in per_file],
+            "data_sha256": per_file[0]["sha256"] if one else [p["sha256"] for p in per_file],
+            "data_samples": int(sum(self.sizes)),
+            "data_files": per_file,
+        }
+
+
+def load_sets(
+    files: tuple[Path, ...] | list[Path],
+    fields: tuple[str, ...],
+    kind: str,
+    who: str,
+    val_fraction: float = 0.05,
+) -> TrainingSets:
+    """Load and join dataset files for training `who` (named in errors), which needs
+    `kind` files of a single peg."""
+    if not files:
+        raise DatasetError("--data: expected at least one dataset file")
+    parts, attrs, sizes, train_idx, val_idx = [], [], [], [], []
+    start = 0
+    for f in files:
+        a, d = load(f, fields)
+        if a.get("kind") != kind:
+            raise DatasetError(
+                f"{f}: field 'kind': {who} trains on a {kind} dataset, this file is {a.get('kind')}"
+            )
+        if attrs and a.get("peg") != attrs[0].get("peg"):
+            raise DatasetError(
+                f"{f}: field 'peg': expected {attrs[0].get('peg')!r} like {files[0]}, "
+                f"got {a.get('peg')!r} (one training set is for one peg)"
+            )
+        m = len(d[fields[0]])
+        n_val = max(1, int(m * val_fraction))
+        train_idx.append(np.arange(start, start + m - n_val))
+        val_idx.append(np.arange(start + m - n_val, start + m))
+        parts.append(d)
+        attrs.append(a)
+        sizes.append(m)
+        start += m
+    data = {k: np.concatenate([p[k] for p in parts]) for k in fields}
+    return TrainingSets(
+        data=data,
+        train_idx=np.concatenate(train_idx),
+        val_idx=np.concatenate(val_idx),
+        attrs=attrs,
+        files=[Path(f) for f in files],
+        sizes=sizes,
+    )

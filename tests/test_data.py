@@ -125,6 +125,38 @@ def test_procedural_bodies_are_valid_training_objects(tmp_path, monkeypatch):
     assert {s.name for s in lib.select(["test"])}.isdisjoint(names)
 
 
+def test_featured_procedural_bodies_put_a_block_or_notch_beside_the_hole(tmp_path, monkeypatch):
+    """`--procedural-features`: mesh bodies whose top is not one flat face around the hole
+    (a raised block or a notch within a few cm of the rim), every one a valid, buildable
+    training object, the same files for the same seed."""
+    import trimesh
+
+    from cfvs_maniskill.objects.build import build_geometry
+
+    monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
+    folder, names = procedural_specs(6, 5, "round", 0.004, 0.045, features=True)
+    lib = load_library([folder])
+    assert not lib.errors
+    shown = 0
+    for n in names:
+        spec = lib.specs[n]
+        assert spec.split == "train" and spec.body_kind == "mesh" and spec.hole_frame
+        build_geometry(spec, "round", 0.004, 0.045)  # room for the hole, collision parts
+        body = trimesh.load(folder / spec.body["file"])
+        top, z = spec.hole_frame[0][2], body.vertices[:, 2]
+        raised = z.max() > top + 0.005
+        stepped = ((z > 0.001) & (z < top - 0.005)).any()
+        notched = body.convex_hull.volume > 1.01 * body.volume  # an L: concave outline
+        shown += bool(raised or stepped or notched)
+    # The rest are straight cuts: an edge near the hole, convex, not told apart from a
+    # smaller primitive here.
+    assert shown >= 4, f"only {shown} of 6 bodies have a block, a step or an inner corner"
+    first = (folder / f"{names[0]}.yaml").read_text()
+    monkeypatch.setenv("CFVS_CACHE", str(tmp_path / "again"))
+    folder2, _ = procedural_specs(6, 5, "round", 0.004, 0.045, features=True)
+    assert (folder2 / f"{names[0]}.yaml").read_text() == first
+
+
 @pytest.mark.slow
 def test_resume_after_kill_gives_exactly_n_unique_samples(tmp_path):
     """SIGKILL a collection after its first chunk, run it again: N samples, each once,

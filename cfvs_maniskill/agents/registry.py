@@ -17,13 +17,17 @@ def _oracle(env) -> Agent:
     return OracleAgent(env)
 
 
-def _cfvs(**switches) -> Callable[..., Agent]:
-    def make(task: TaskSpec) -> Agent:
-        from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
+def _cfvs(name: str = "cfvs", weights: str = "", **switches) -> Callable[..., Agent]:
+    """CFVS with config `switches`; `weights`: a folder under agents/cfvs/ (its tasks.yaml
+    says which files) instead of the shipped default."""
 
+    def make(task: TaskSpec) -> Agent:
+        from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, CFVSConfig
+
+        if weights:
+            switches["weights_dir"] = WEIGHTS_DIR / weights
         agent = CFVSAgent(task, CFVSConfig(**switches))
-        if switches:
-            agent.name = "cfvs_" + "_".join(f"no_{k}" for k in switches)
+        agent.name = name
         return agent
 
     return make
@@ -53,10 +57,13 @@ def _kovis(task: TaskSpec) -> Agent:
 AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs": _cfvs(),
     # The paper's ablations (Table IV).
-    "cfvs_no_c2f": _cfvs(coarse_to_fine=False),
-    "cfvs_no_map": _cfvs(confidence_map=False),
-    "cfvs_no_aug": _cfvs(augmentation=False),
-    "cfvs_aug": _cfvs(augmentation=True),
+    "cfvs_no_c2f": _cfvs("cfvs_no_c2f", coarse_to_fine=False),
+    "cfvs_no_map": _cfvs("cfvs_no_map", confidence_map=False),
+    "cfvs_no_aug": _cfvs("cfvs_no_aug", augmentation=False),
+    "cfvs_aug": _cfvs("cfvs_aug", augmentation=True),
+    # The fine stage trained on the ideal sensor's clouds only (the weights before the
+    # sensor-mixed OPN): what training on the sensors' noise buys.
+    "cfvs_ideal_data": _cfvs("cfvs_ideal_data", weights="ideal_data"),
     # The paper's baselines (Table II).
     "icp": _icp("workspace"),
     "icp_kpts": _icp("oakn"),

@@ -67,6 +67,9 @@ class CollectArgs:
     """Also use procedurally varied training bodies (boxes, cylinders, prisms)."""
     procedural_count: int = 240
     """How many procedural bodies (with --procedural)."""
+    procedural_features: bool = False
+    """With --procedural: mesh bodies with a raised block (wall, step, boss) and / or a notch
+    (edge, inner corner) beside a hole placed anywhere its walls allow."""
     points: int = 1024
     """Points per sample after sampling (fixed N)."""
     seed: int = 0
@@ -88,6 +91,7 @@ def file_attrs(args: CollectArgs, task) -> dict:
         "seed": args.seed,
         "objects": json.dumps(list(args.objects)),
         "procedural": args.procedural_count if args.procedural else 0,
+        "procedural_features": bool(args.procedural and args.procedural_features),
         "frame": "tool",
         "units": "metres, radians",
         "keypoint_spacing": L.KEYPOINT_SPACING,
@@ -110,7 +114,12 @@ class Collector:
         self.groups: list[list[str]] = [base]
         if args.procedural:
             folder, names = procedural_specs(
-                args.procedural_count, args.seed, task.peg, task.clearance, task.hole_depth
+                args.procedural_count,
+                args.seed,
+                task.peg,
+                task.clearance,
+                task.hole_depth,
+                args.procedural_features,
             )
             self.assets.append(str(folder))
             groups = [names[i : i + GROUP_SIZE] for i in range(0, len(names), GROUP_SIZE)]

@@ -1,6 +1,11 @@
 """Procedurally varied training bodies (beyond the paper): boxes, cylinders and prisms with
 random dimensions and hole positions, written as ordinary hole-object files.
 
+With `features`, each body is a mesh instead: the same primitive with things near the hole
+that real parts have and the plain primitives never show the camera: a raised block (a
+wall, a step, a boss) beside the hole, a notch cut out of the body (an edge or an inner
+corner close to the rim), and holes anywhere their walls allow, not only near the centre.
+
 The paper trains on four cuboids; here the networks can also see hundreds of distinct
 bodies. Each body is a normal `assets/holes`-style YAML file (split: train), so it goes
 through the same validation and geometry cache as every user file, and test objects are
@@ -13,8 +18,10 @@ import os
 from pathlib import Path
 
 import numpy as np
+import trimesh
 import yaml
 
+from cfvs_maniskill.constants import MIN_WALL, hole_half_extent
 from cfvs_maniskill.objects.build import build_geometry, cache_dir
 from cfvs_maniskill.objects.spec import HoleSpecError, parse_spec
 
@@ -50,12 +57,94 @@ def _inner_radius(body: dict) -> float:
     return p["radius"] * np.cos(np.pi / p["sides"])
 
 
+FEATURE_GAP = (0.006, 0.04)
+"""Gap between the hole's edge and a raised block or a notch, metres."""
+FEATURE_HEIGHT = (0.008, 0.05)
+"""Height of a raised block above the top face."""
+
+
+def _primitive_mesh(body: dict) -> trimesh.Trimesh:
+    """The primitive as a mesh, bottom at z = 0, centred on the z axis."""
+    if "box" in body:
+        sx, sy, h = body["box"]["size"]
+        return trimesh.creation.box([sx, sy, h], transform=_at(0, 0, h / 2))
+    if "cylinder" in body:
+        c = body["cylinder"]
+        return trimesh.creation.cylinder(
+            c["radius"], c["height"], 64, transform=_at(0, 0, c["height"] / 2)
+        )
+    p = body["prism"]  # a cylinder of `sides` sections is the regular prism
+    return trimesh.creation.cylinder(
+        p["radius"], p["height"], p["sides"], transform=_at(0, 0, p["height"] / 2)
+    )
+
+
+def _at(x: float, y: float, z: float) -> np.ndarray:
+    return trimesh.transformations.translation_matrix([x, y, z])
+
+
+def _featured_body(rng: np.random.Generator, peg: str, clearance: float, folder: Path, name: str):
+    """A primitive with a raised block and/or a notch beside a hole placed anywhere: (the
+    body entry of a mesh spec, hole_frame), or None when the draw left the primitive as it
+    was."""
+    base_body = _random_body(rng)
+    base = _primitive_mesh(base_body)
+    top = float(base.bounds[1, 2])
+    half = hole_half_extent(peg, clearance)
+    room = max(0.0, _inner_radius(base_body) - half * np.sqrt(2) - MIN_WALL)
+    hole = rng.uniform(-1, 1, size=2) * room / np.sqrt(2)
+    parts, cuts = [base], []
+    kinds = rng.choice(["block", "notch", "both"], p=[0.45, 0.3, 0.25])
+    # The feature sits on one side of the hole, `gap` beyond its edge (its square's
+    # circumscribed half width, so the hole keeps its full wall whatever the peg).
+    side = rng.uniform(0, 2 * np.pi)
+    u = np.array([np.cos(side), np.sin(side)])
+    if kinds in ("block", "both"):
+        gap = rng.uniform(*FEATURE_GAP)
+        depth, length = rng.uniform(0.01, 0.06), rng.uniform(0.02, 0.16)
+        h = rng.uniform(*FEATURE_HEIGHT)
+        c = hole + u * (half * np.sqrt(2) + gap + depth / 2)
+        block = trimesh.creation.box([depth, length, h + 0.002])
+        block.apply_transform(trimesh.transformations.rotation_matrix(side, [0, 0, 1]))
+        block.apply_translation([c[0], c[1], top + h / 2 - 0.001])
+        parts.append(block)
+    if kinds in ("notch", "both"):
+        u = -u if kinds == "both" else u  # the other side of the hole
+        gap = rng.uniform(*FEATURE_GAP) + MIN_WALL
+        size = 0.3
+        c = hole + u * (half * np.sqrt(2) + gap + size / 2)
+        # Turned a little off the direction: an inner corner, not only a straight edge.
+        notch = trimesh.creation.box([size, size, 1.0])
+        notch.apply_transform(
+            trimesh.transformations.rotation_matrix(side + rng.uniform(-0.8, 0.8), [0, 0, 1])
+        )
+        # Down to the table half the time (an L-shaped body), else a step down.
+        floor = -0.01 if rng.random() < 0.5 else top * rng.uniform(0.2, 0.85)
+        notch.apply_translation([c[0], c[1], floor + 0.5])
+        cuts.append(notch)
+    mesh = trimesh.boolean.union(parts, engine="manifold") if len(parts) > 1 else base
+    if cuts:
+        mesh = trimesh.boolean.difference([mesh, *cuts], engine="manifold")
+        if len(parts) == 1 and mesh.volume > base.volume - 1e-7:
+            return None  # the notch missed the body: it would be a plain primitive
+    mesh.export(folder / f"{name}.stl")
+    frame = {
+        "origin": [round(float(hole[0]), 5), round(float(hole[1]), 5), round(top, 5)],
+        "axis": [0.0, 0.0, 1.0],
+    }
+    return {"mesh": {"file": f"{name}.stl"}}, frame
+
+
 def procedural_specs(
-    count: int, seed: int, peg: str, clearance: float, depth: float
+    count: int, seed: int, peg: str, clearance: float, depth: float, features: bool = False
 ) -> tuple[Path, list[str]]:
-    """Write (once) `count` valid training bodies for `peg`; return their folder and names."""
-    folder = cache_dir().parent / "procedural" / f"{peg}-c{clearance:g}-d{depth:g}-s{seed}-n{count}"
-    names = [f"proc_{seed}_{i:04d}" for i in range(count)]
+    """Write (once) `count` valid training bodies for `peg`; return their folder and names.
+    `features`: mesh bodies with a raised block and / or a notch beside the hole."""
+    tag = "-features" if features else ""
+    folder = (
+        cache_dir().parent / "procedural" / f"{peg}-c{clearance:g}-d{depth:g}-s{seed}-n{count}{tag}"
+    )
+    names = [f"proc{'f' if features else ''}_{seed}_{i:04d}" for i in range(count)]
     if all((folder / f"{n}.yaml").is_file() for n in names):
         return folder, names
     folder.mkdir(parents=True, exist_ok=True)
@@ -63,17 +152,25 @@ def procedural_specs(
     for name in names:
         path = folder / f"{name}.yaml"
         for _ in range(200):
-            body = _random_body(rng)
-            # Room for the hole's centre to move: the top face minus a hole and a wall.
-            room = max(0.0, _inner_radius(body) - 0.03)
-            shift = rng.uniform(-1, 1, size=2) * HOLE_SHIFT * room / np.sqrt(2)
+            if features:
+                drawn = _featured_body(rng, peg, clearance, folder, name)
+                if drawn is None:
+                    continue
+                body, frame = drawn
+                where = {"hole_frame": frame}
+            else:
+                body = _random_body(rng)
+                # Room for the hole's centre to move: the top face minus a hole and a wall.
+                room = max(0.0, _inner_radius(body) - 0.03)
+                shift = rng.uniform(-1, 1, size=2) * HOLE_SHIFT * room / np.sqrt(2)
+                where = {"hole_at": [round(float(v), 4) for v in shift]}
             grey = float(rng.uniform(0.35, 0.8))
             tint = rng.uniform(-0.08, 0.08, size=3)
             doc = {
                 "split": "train",
                 "hole": [peg],
                 "body": body,
-                "hole_at": [round(float(v), 4) for v in shift],
+                **where,
                 "color": [round(float(np.clip(grey + t, 0, 1)), 3) for t in tint],
             }
             spec = parse_spec(doc, path)

@@ -23,7 +23,14 @@ from tqdm import tqdm
 from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data.augment import AugmentConfig, augment
 from cfvs_maniskill.data.store import DatasetError, load_sets
-from cfvs_maniskill.nets.checkpoint import build, file_sha256, save_atomic, write_weights
+from cfvs_maniskill.nets.checkpoint import (
+    WeightsError,
+    build,
+    file_sha256,
+    load_weights,
+    save_atomic,
+    write_weights,
+)
 from cfvs_maniskill.nets.oakn import OAKNConfig, oakn_loss, weighted_keypoints
 from cfvs_maniskill.nets.opn import OPNConfig, opn_loss
 from cfvs_maniskill.nets.pointnet2 import seed_sampling
@@ -58,6 +65,9 @@ class TrainArgs:
     seed: int = 0
     max_minutes: float = 0.0
     """Stop (resumably) after this much wall time; 0 = no limit."""
+    init: Path | None = None
+    """Start from these weights (same net kind and config) instead of random ones: fine-tune
+    on new data (e.g. more sensors or bodies) with fewer epochs."""
 
 
 VOTING = ("oakn", "opnv")
@@ -192,6 +202,14 @@ def train(args: TrainArgs) -> dict:
     torch.manual_seed(args.seed)
     seed_sampling(args.seed)
     model = build(args.net, dataclasses.asdict(net_cfg))
+    if args.init is not None:
+        start, start_meta = load_weights(args.init, args.net, sets.peg)
+        if start_meta["config"] != dataclasses.asdict(net_cfg):
+            raise DatasetError(
+                f"{args.init}: field 'config': --init needs a {args.net} of config "
+                f"{dataclasses.asdict(net_cfg)}, the file has {start_meta['config']}"
+            )
+        model.load_state_dict(start.state_dict())
     opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
     steps_per_epoch = math.ceil(len(train_idx) / args.batch)
     sched = torch.optim.lr_scheduler.OneCycleLR(
@@ -261,6 +279,9 @@ def train(args: TrainArgs) -> dict:
         "config": dataclasses.asdict(net_cfg),
         "points": n_points,
         **data_record,
+        "init": None
+        if args.init is None
+        else {"path": str(args.init), "sha256": file_sha256(args.init)},
     }
     write_weights(
         args.out, model, meta, "cfvs_maniskill.train", args, state["history"], state["wall_s"]
@@ -274,7 +295,7 @@ def cli_main(args_type, train_fn, argv: list[str] | None = None) -> int:
     args = tyro.cli(args_type, args=argv)
     try:
         train_fn(args)
-    except DatasetError as e:
+    except (DatasetError, WeightsError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0

@@ -269,3 +269,36 @@ def test_training_on_several_files_holds_out_each_and_records_them(coarse_file, 
         f.attrs["peg"] = "round"
     with pytest.raises(DatasetError, match=r"other\.h5: field 'peg'"):
         load_sets((coarse_file, other), ("points",), "coarse", "oakn")
+
+
+def test_training_from_init_weights_starts_where_they_end(coarse_file, tmp_path, capsys):
+    """`train --init W`: the run starts from W's weights (zero epochs of change at lr 0 leave
+    them as they were), is recorded, and a file of another net kind exits 2 naming it."""
+    from cfvs_maniskill.nets.checkpoint import load_weights
+    from cfvs_maniskill.train import TrainArgs, main
+    from cfvs_maniskill.train import train as train_cfvs
+
+    first = tmp_path / "first.pt"
+    train_cfvs(TrainArgs(net="oakn", data=(coarse_file,), out=first, epochs=1, batch=4, points=128))
+    again = tmp_path / "again.pt"
+    args = TrainArgs(
+        net="oakn",
+        data=(coarse_file,),
+        out=again,
+        epochs=1,
+        batch=4,
+        points=128,
+        lr=0.0,
+        weight_decay=0.0,
+        init=first,
+    )
+    train_cfvs(args)
+    a, _ = load_weights(first, "oakn")
+    b, meta = load_weights(again, "oakn")
+    for (k, x), y in zip(a.state_dict().items(), b.state_dict().values(), strict=True):
+        if x.dtype.is_floating_point and "running" not in k and "num_batches" not in k:
+            assert torch.equal(x, y), k
+    assert meta["init"]["path"] == str(first)
+    bad = ["--net", "oakn", "--data", str(coarse_file), "--out", str(tmp_path / "x.pt")]
+    assert main([*bad, "--init", str(tmp_path / "nosuch.pt")]) == 2
+    assert "nosuch.pt: weights file not found" in capsys.readouterr().err

@@ -69,15 +69,17 @@ def main(args: RunArgs) -> list:
     from tqdm import tqdm
 
     from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-    from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, AGENTS, make_agent
+    from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, make_agent, resolve_agent
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.eval.results import ResultsError, append
     from cfvs_maniskill.objects.library import SelectionError
     from cfvs_maniskill.stats import wilson_interval
 
     env_id = resolve_task(args.task)
-    if args.agent not in AGENTS:
-        _fail(f"unknown agent '{args.agent}'; valid: {', '.join(AGENTS)}")
+    try:
+        resolve_agent(args.agent)
+    except KeyError as e:
+        _fail(e.args[0])
     if args.episodes < 1:
         _fail(f"--episodes must be >= 1, got {args.episodes}")
     from cfvs_maniskill.sensing.profile import load_profile

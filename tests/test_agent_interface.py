@@ -141,3 +141,23 @@ def test_records_carry_the_true_residual_after_each_move(make_env, tmp_path):
     text = residuals.table([rec, {**rec, "sensor": "realistic", "move_residuals": [[3.0, 2.0]]}])
     assert "| PegInsert6DoF | oracle | realistic | 1 | 1 | 3.0 / 3.0 | 2.0 / 2.0 |" in text
     assert residuals.plot([rec], tmp_path, agent="oracle").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_cfvs_with_a_weights_folder_loads_those_files(make_env, tmp_path):
+    """`cfvs@DIR`: CFVS with the networks in DIR (here the shipped 6-DoF pair copied under
+    another layout), the same forward as the shipped agent; a missing folder is named."""
+    import shutil
+
+    from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, weights_for
+
+    env = make_env(ENV_ID, obs_mode="pointcloud")
+    shipped = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR)
+    (tmp_path / "square").mkdir()
+    for net, p in shipped.items():
+        shutil.copy(p, tmp_path / "square" / f"{net if net == 'oakn' else 'opnv'}.pt")
+    mine = make_agent(f"cfvs@{tmp_path}", env)
+    ours = make_agent("cfvs", env)
+    assert mine.name == f"cfvs@{tmp_path}"
+    assert mine.opn_meta["data_sha256"] == ours.opn_meta["data_sha256"]
+    with pytest.raises(KeyError, match="no weights folder"):
+        make_agent(f"cfvs@{tmp_path / 'nope'}", env)

@@ -121,6 +121,7 @@ def test_bad_line_in_the_middle_is_named(tmp_path):
     ("flag", "value", "valid"),
     [
         ("--agents", "nope", "cfvs"),
+        ("--agents", "cfvs@/no/such/weights", "no weights folder"),
         ("--tasks", "Nope", "PegInsert6DoF"),
         ("--objects", "nope", "test"),
     ],

@@ -66,12 +66,12 @@ def weights_for(
     task: str, peg: str, weights_dir: Path, augmentation: bool | None = None
 ) -> dict[str, Path]:
     """The OAKN / OPN files for a task: `tasks.yaml` in the weights folder maps task names;
-    tasks it does not list (e.g. new task files) use `<peg>/oakn.pt`, `<peg>/opn.pt`.
+    tasks it does not list (e.g. new task files) use `<peg>/oakn.pt`, `<peg>/opnv.pt`.
     With `augmentation` set, the file trained that way: the shipped one if its .json says
     so, else its `_aug` / `_noaug` sibling."""
     table_file = weights_dir / "tasks.yaml"
     table = yaml.safe_load(table_file.read_text()) if table_file.is_file() else {}
-    entry = (table or {}).get(task) or {n: f"{peg}/{n}.pt" for n in ("oakn", "opn")}
+    entry = (table or {}).get(task) or {"oakn": f"{peg}/oakn.pt", "opn": f"{peg}/opnv.pt"}
     out = {}
     for net in ("oakn", "opn"):
         p = weights_dir / entry[net]

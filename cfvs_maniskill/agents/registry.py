@@ -78,11 +78,33 @@ PRIVILEGED = {"oracle"}
 """Factories that take the env itself (they read the truth)."""
 
 
+WEIGHTS_PREFIX = "cfvs@"
+"""`cfvs@DIR`: the CFVS agent with the trained networks in DIR (laid out like
+agents/cfvs/: a tasks.yaml, or <peg>/oakn.pt and <peg>/opnv.pt), e.g. weights you trained."""
+
+
+def resolve_agent(name: str) -> Callable[..., Agent]:
+    """The factory for an agent name (a registered one or `cfvs@DIR`); KeyError with a
+    message naming what is wrong."""
+    if name in AGENTS:
+        return AGENTS[name]
+    if name.startswith(WEIGHTS_PREFIX):
+        from pathlib import Path
+
+        folder = Path(name[len(WEIGHTS_PREFIX) :]).expanduser()
+        if not folder.is_dir():
+            raise KeyError(f"agent '{name}': no weights folder {folder}")
+        return _cfvs(name, weights=str(folder.resolve()))
+    raise KeyError(
+        f"unknown agent '{name}'; valid: {', '.join(AGENTS)}, or {WEIGHTS_PREFIX}DIR "
+        "(CFVS with the weights in DIR)"
+    )
+
+
 def make_agent(name: str, env) -> Agent:
     """The agent `name` for `env`'s task: built from the task's constants alone, except the
     privileged oracle."""
-    if name not in AGENTS:
-        raise KeyError(f"unknown agent '{name}'; valid: {', '.join(AGENTS)}")
+    factory = resolve_agent(name)
     if name in PRIVILEGED:
-        return AGENTS[name](env)
-    return AGENTS[name](TaskSpec.of(env.unwrapped.task))
+        return factory(env)
+    return factory(TaskSpec.of(env.unwrapped.task))

@@ -57,12 +57,14 @@ def _fail(message: str) -> None:
 def resolve(args: EvalArgs) -> dict[str, list[str]]:
     """Task -> object names; unknown task / agent / object -> exit 2 with the valid names."""
     from cfvs_maniskill import TASKS
-    from cfvs_maniskill.agents.registry import AGENTS
+    from cfvs_maniskill.agents.registry import resolve_agent
     from cfvs_maniskill.objects.library import SelectionError, load_library
 
     for a in args.agents:
-        if a not in AGENTS:
-            _fail(f"unknown agent '{a}'; valid: {', '.join(AGENTS)}")
+        try:
+            resolve_agent(a)
+        except KeyError as e:
+            _fail(e.args[0])
     if args.episodes_per_object < 1:
         _fail(f"--episodes-per-object must be >= 1, got {args.episodes_per_object}")
     lib = load_library([str(a) for a in args.assets])

@@ -69,7 +69,7 @@ def main(args: RunArgs) -> list:
     from tqdm import tqdm
 
     from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-    from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, make_agent, resolve_agent
+    from cfvs_maniskill.agents.registry import agent_obs_mode, make_agent, resolve_agent
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.eval.results import ResultsError, append
     from cfvs_maniskill.objects.library import SelectionError
@@ -89,7 +89,7 @@ def main(args: RunArgs) -> list:
     except ValueError as e:
         _fail(str(e))
     kwargs = dict(
-        obs_mode=AGENT_OBS_MODES.get(args.agent, "pointcloud"),
+        obs_mode=agent_obs_mode(args.agent),
         objects=list(args.objects) or None,
         assets=[str(a) for a in args.assets],
         init_error=args.init_error,

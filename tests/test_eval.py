@@ -320,3 +320,40 @@ def test_eval_runs_a_grid_of_sensor_profiles(tmp_path):
     assert "| realistic |" in (tmp_path / "summary.md").read_text()
     r = run_cli(*args)
     assert r.returncode == 0 and "0 to run" in r.stdout
+
+
+def test_your_own_agent_runs_through_eval_by_module_and_class(tmp_path):
+    """docs/your-own-agent.md: `--agents package.module:Class` evaluates an agent nobody
+    registered, beside ours, on the same scenes; a bad spec exits 2 naming it."""
+    mine = "examples.top_face_agent:TopFaceAgent"
+    r = run_cli(
+        "cfvs_maniskill.eval",
+        "--agents",
+        mine,
+        "oracle",
+        "--tasks",
+        "PegInsert3DoF",
+        "--objects",
+        "cuboid_test_1",
+        "--init-errors",
+        "small",
+        "--episodes-per-object",
+        "2",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path),
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    rows = [json.loads(x) for x in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    by_agent = {a: [x for x in rows if x["agent"] == a] for a in (mine, "oracle")}
+    assert len(by_agent[mine]) == 2 and len(by_agent["oracle"]) == 2
+    assert {x["seed"] for x in by_agent[mine]} == {x["seed"] for x in by_agent["oracle"]}
+    assert any(x["steps"] > 0 for x in by_agent[mine])  # it moved the robot
+    for spec, says in [
+        ("nosuch_pkg.mod:Agent", "cannot import module 'nosuch_pkg.mod'"),
+        ("examples.top_face_agent:np", "not a concrete subclass"),
+        ("examples.top_face_agent:Nope", "has no 'Nope'"),
+    ]:
+        r = run_cli("cfvs_maniskill.eval", "--agents", spec, "--out", str(tmp_path / "bad"))
+        assert r.returncode == 2 and says in r.stderr and "Traceback" not in r.stderr, spec

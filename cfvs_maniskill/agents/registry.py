@@ -83,9 +83,31 @@ WEIGHTS_PREFIX = "cfvs@"
 agents/cfvs/: a tasks.yaml, or <peg>/oakn.pt and <peg>/opnv.pt), e.g. weights you trained."""
 
 
+def _user_agent(spec: str) -> type[Agent]:
+    """`package.module:Class` -> the class, checked to be an Agent built from a TaskSpec."""
+    import importlib
+    import inspect
+
+    module_name, _, class_name = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as e:  # ModuleNotFoundError, or the module itself fails to import
+        raise KeyError(f"agent '{spec}': cannot import module '{module_name}' ({e})") from e
+    cls = getattr(module, class_name, None)
+    if cls is None:
+        raise KeyError(f"agent '{spec}': module '{module_name}' has no '{class_name}'")
+    if not (inspect.isclass(cls) and issubclass(cls, Agent)) or inspect.isabstract(cls):
+        raise KeyError(
+            f"agent '{spec}': '{class_name}' is not a concrete subclass of "
+            "cfvs_maniskill.agents.base.Agent (it needs act(observation))"
+        )
+    return cls
+
+
 def resolve_agent(name: str) -> Callable[..., Agent]:
-    """The factory for an agent name (a registered one or `cfvs@DIR`); KeyError with a
-    message naming what is wrong."""
+    """The factory for an agent name: a registered one, `cfvs@DIR`, or your own class as
+    `package.module:Class` (built with the task's TaskSpec); KeyError with a message naming
+    what is wrong."""
     if name in AGENTS:
         return AGENTS[name]
     if name.startswith(WEIGHTS_PREFIX):
@@ -95,10 +117,28 @@ def resolve_agent(name: str) -> Callable[..., Agent]:
         if not folder.is_dir():
             raise KeyError(f"agent '{name}': no weights folder {folder}")
         return _cfvs(name, weights=str(folder.resolve()))
+    if ":" in name:
+        cls = _user_agent(name)
+
+        def make(task: TaskSpec) -> Agent:
+            agent = cls(task)
+            agent.name = name  # records and reports use the name it was asked by
+            return agent
+
+        return make
     raise KeyError(
-        f"unknown agent '{name}'; valid: {', '.join(AGENTS)}, or {WEIGHTS_PREFIX}DIR "
-        "(CFVS with the weights in DIR)"
+        f"unknown agent '{name}'; valid: {', '.join(AGENTS)}, {WEIGHTS_PREFIX}DIR (CFVS with "
+        "the weights in DIR) or package.module:Class (your own Agent subclass)"
     )
+
+
+def agent_obs_mode(name: str) -> str:
+    """The ManiSkill obs mode the agent `name` needs."""
+    if name in AGENT_OBS_MODES:
+        return AGENT_OBS_MODES[name]
+    if ":" in name and not name.startswith(WEIGHTS_PREFIX):
+        return _user_agent(name).obs_mode
+    return "pointcloud"
 
 
 def make_agent(name: str, env) -> Agent:

@@ -50,11 +50,11 @@ class Worker:
 
     def _agent(self, task: str, name: str, sensor: str):
         from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-        from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, make_agent
+        from cfvs_maniskill.agents.registry import agent_obs_mode, make_agent
 
         key = (task, name, sensor)
         if key not in self.agents:
-            env = self._env(task, AGENT_OBS_MODES.get(name, "pointcloud"), sensor)
+            env = self._env(task, agent_obs_mode(name), sensor)
             executor = Executor(env, ExecutorConfig(search_radius=self.cfg.search_radius))
             self.agents[key] = (env, make_agent(name, env), executor)
         return self.agents[key]

@@ -52,7 +52,7 @@ def render(
 
     import cfvs_maniskill  # noqa: F401  (render device, task registration)
     from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-    from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, make_agent
+    from cfvs_maniskill.agents.registry import agent_obs_mode, make_agent
     from cfvs_maniskill.episode import run_episode
 
     out.mkdir(parents=True, exist_ok=True)
@@ -68,7 +68,7 @@ def render(
             ok, _, reason = meta.read_text().partition(" ")
             videos.append(Video(rec, path, ok == "success", reason.strip()))
             continue
-        obs_mode = AGENT_OBS_MODES.get(rec["agent"], "pointcloud")
+        obs_mode = agent_obs_mode(rec["agent"])
         sensor = rec.get("sensor", "ideal")
         key = (rec["task"], obs_mode, sensor)
         if key not in envs:

@@ -302,6 +302,24 @@ def test_report_puts_sensor_profiles_side_by_side(reference, tmp_path):
     icp = next(x for x in summary.splitlines() if x.startswith("| icp | 3-DoF |"))
     assert "0/6 = 0.00" in icp and icp.rstrip().endswith("0.10 / 0.10 |")
 
+    # --readme fills the headline table between its markers, keeping the rest of the file
+    readme = tmp_path / "README.md"
+    readme.write_text(
+        "intro\n<!-- report:headline begin -->\nold\n<!-- report:headline end -->\nend\n"
+    )
+    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--no-videos",
+                "--readme", str(readme))  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    filled = readme.read_text()
+    assert filled.startswith("intro\n") and filled.endswith("end\n") and "old" not in filled
+    row = next(x for x in filled.splitlines() if x.startswith("| icp |"))
+    assert row.startswith("| icp | 0.00") and "| agent | 3DoF ideal | 3DoF realistic |" in filled
+    readme.write_text("no markers\n")
+    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--no-videos",
+                "--readme", str(readme))  # fmt: skip
+    assert r.returncode == 2 and "report:headline begin" in r.stderr
+    assert readme.read_text() == "no markers\n"
+
 
 @pytest.mark.slow
 def test_eval_runs_a_grid_of_sensor_profiles(tmp_path):

@@ -24,6 +24,9 @@ class ReportArgs:
     (replayed from their records; files already there are kept)."""
     assets: tuple[Path, ...] = ()
     """Extra hole-object folders or files the results used (for the video replays)."""
+    readme: Path | None = None
+    """Also fill the headline table (main agents, tasks and sensor profiles, 15 / 30 cm)
+    into this file between its `<!-- report:headline begin/end -->` markers."""
 
 
 def main(args: ReportArgs) -> int:
@@ -37,6 +40,18 @@ def main(args: ReportArgs) -> int:
     if not records:
         print(f"error: {args.results}: no result records (*.jsonl) found", file=sys.stderr)
         return 2
+    readme_text = None
+    if args.readme is not None:
+        try:
+            readme_text = tables.replace_marked(
+                args.readme.read_text(),
+                "headline",
+                tables.table_headline(records),
+                str(args.readme),
+            )
+        except (OSError, ValueError) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
     args.out.mkdir(parents=True, exist_ok=True)
     pngs = [
         plots.success_per_agent(records, args.out),
@@ -78,6 +93,9 @@ def main(args: ReportArgs) -> int:
         + tables.table_compact(records)
         + "\n"
     )
+    if readme_text is not None:
+        args.readme.write_text(readme_text)
+        print(f"filled the headline table into {args.readme}")
     print(f"wrote {args.out / 'README.md'} and {len(pngs)} plots ({len(records)} episodes)")
     return 0
 

@@ -156,3 +156,43 @@ def table_iv(records: list[dict]) -> str:
         recs = [r for r in records if _dof(r["task"]) == 6 and r["label"] == label]
         out.append(f"| {label} | {_cell(recs)} | {ref:.2f} |")
     return "\n".join(out)
+
+
+HEADLINE_AGENTS = ("cfvs", "cfvs_plain", "3drhd", "icp_kpts", "icp", "kovis", "oracle")
+"""The README's rows: CFVS (with and without the compliant search), the baselines, the
+ceiling."""
+HEADLINE_TASKS = ("PegInsert3DoF", "PegInsert4DoF", "PegInsert6DoF")
+HEADLINE_SENSORS = ("ideal", "realistic")
+
+
+def table_headline(records: list[dict]) -> str:
+    """Success at 15 / 30 cm per agent, task and sensor profile, the main agents only (the
+    README's table; everything else is in the report)."""
+    head = " | ".join(
+        f"{t[len('PegInsert') :]} {s}" for t in HEADLINE_TASKS for s in HEADLINE_SENSORS
+    )
+    out = [f"| agent | {head} |", "|---|" + "---|" * len(HEADLINE_TASKS) * len(HEADLINE_SENSORS)]
+    for label in HEADLINE_AGENTS:
+        recs = [r for r in records if r["label"] == label]
+        if not recs:
+            continue
+        cells = []
+        for t in HEADLINE_TASKS:
+            for s in HEADLINE_SENSORS:
+                rates = []
+                for i in INITS:
+                    m = [r for r in recs if r["task"] == t and r["sensor"] == s and r["init"] == i]
+                    rates.append(f"{sum(r['success'] for r in m) / len(m):.2f}" if m else "-")
+                cells.append(" / ".join(rates))
+        out.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def replace_marked(text: str, name: str, block: str, where: str) -> str:
+    """`text` with the part between `<!-- report:NAME begin -->` and `<!-- report:NAME end
+    -->` replaced by `block`; ValueError naming `where` when the markers are missing."""
+    begin, end = f"<!-- report:{name} begin -->", f"<!-- report:{name} end -->"
+    a, b = text.find(begin), text.find(end)
+    if a < 0 or b < a:
+        raise ValueError(f"{where}: no '{begin}' ... '{end}' markers to fill")
+    return text[: a + len(begin)] + "\n" + block + "\n" + text[b:]

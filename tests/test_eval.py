@@ -313,7 +313,9 @@ def test_report_puts_sensor_profiles_side_by_side(reference, tmp_path):
     filled = readme.read_text()
     assert filled.startswith("intro\n") and filled.endswith("end\n") and "old" not in filled
     row = next(x for x in filled.splitlines() if x.startswith("| icp |"))
-    assert row.startswith("| icp | 0.00") and "| agent | 3DoF ideal | 3DoF realistic |" in filled
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert len(cells) == 7 and cells[2] == "0.00 / -"  # 3-DoF realistic: all set to fail
+    assert "| agent | 3DoF ideal | 3DoF realistic |" in filled
     readme.write_text("no markers\n")
     r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--no-videos",
                 "--readme", str(readme))  # fmt: skip

@@ -1,4 +1,4 @@
-"""Every speed figure of issue 9 in one run: `python -m benchmarks.run` (or `make bench`).
+"""Every speed figure in one run: `python -m benchmarks.run` (or `make bench`).
 
 Prints the figure table and rewrites benchmarks/RESULTS.md with the machine, date and
 commit. Figures are ratios measured in the same run (these machines are noisy).

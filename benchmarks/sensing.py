@@ -1,6 +1,6 @@
 """The realistic sensor model's cost: a point-cloud observation under `realistic` against
 `ideal` (same task, same scene), interleaved so both see the same machine load. Target
-(issue 21): at most 20% more time per observation."""
+: at most 20% more time per observation."""
 
 from __future__ import annotations
 

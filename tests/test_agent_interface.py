@@ -1,4 +1,4 @@
-"""No privileged data reaches an agent (issue 21): agents are built from the task's nominal
+"""No privileged data reaches an agent: agents are built from the task's nominal
 constants, seeded from the episode seed, and see only what a robot's sensors report."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The paper's baselines on the shared task API (issue 7): icp, icp_kpts, 3drhd, kovis."""
+"""The paper's baselines on the shared task API: icp, icp_kpts, 3drhd, kovis."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The CFVS agent and its shipped weights (issue 6)."""
+"""The CFVS agent and its shipped weights."""
 
 from __future__ import annotations
 

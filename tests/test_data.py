@@ -1,4 +1,4 @@
-"""Datasets (issue 5): labels checked geometrically on real rendered samples, augmentation,
+"""Datasets: labels checked geometrically on real rendered samples, augmentation,
 crash-safe resumable files, the picture."""
 
 from __future__ import annotations

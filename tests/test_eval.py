@@ -1,4 +1,4 @@
-"""The evaluation runner (issue 8): resumable, exactly once, deterministic."""
+"""The evaluation runner: resumable, exactly once, deterministic."""
 
 from __future__ import annotations
 

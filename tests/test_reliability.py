@@ -1,4 +1,4 @@
-"""Reliability (issue 10): faults inside an episode, kills, and full disks lose nothing and
+"""Reliability: faults inside an episode, kills, and full disks lose nothing and
 say what went wrong. (Bad inputs: test_validation.py, test_cfvs.py, test_run_cli.py,
 test_eval.py; Ray worker deaths and torn lines: test_eval.py; killed collections:
 test_data.py.)"""

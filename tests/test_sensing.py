@@ -1,4 +1,4 @@
-"""Sensor profiles (issue 21): the realistic depth model's statistics and edge model, the
+"""Sensor profiles: the realistic depth model's statistics and edge model, the
 hand-eye error, the wrist force/torque sensor, profile files and their errors."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Tight-fit tasks (issue 11): task files, the chamfered peg, the wrist force reading and a
+"""Tight-fit tasks: task files, the chamfered peg, the wrist force reading and a
 contact model that behaves at 0.5 mm clearance (no tunnelling, no explosion, jams scored
 as failures)."""
 

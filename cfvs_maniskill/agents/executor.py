@@ -37,7 +37,7 @@ class MoveResult:
 class ExecutorConfig:
     max_speed: float = 0.5
     """Tool speed limit, m/s (half the UR5's 1 m/s; measured: 0.25 m/s gave the same
-    success and 1.1 s more servo time, issue 9)."""
+    success and 1.1 s more servo time)."""
     max_turn: float = np.radians(90.0)
     """Tool rotation speed limit, rad/s."""
     settle_steps: int = 3

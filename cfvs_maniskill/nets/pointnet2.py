@@ -2,7 +2,7 @@
 
 Tensors are channel-last throughout -- points (B, N, 3), features (B, N, C) -- so every
 shared MLP is an `nn.Linear` over the last axis, which on CPU is faster than the usual
-Conv2d(1x1) + BatchNorm (measured: `../shared/notes/cpu-training.md`). LayerNorm replaces
+Conv2d(1x1) + BatchNorm (measured on a 2-core CPU). LayerNorm replaces
 BatchNorm so batch size 1 at inference behaves exactly like training.
 
 Farthest point sampling uses `fpsample` (Rust, QuickFPS): a python loop costs 10x more and

@@ -26,7 +26,7 @@ def table(records: list[dict]) -> str:
     """Per task, agent, sensor and move: lateral and tilt error, median and p90."""
     cells = _by_move(records)
     if not cells:
-        return "No records with move residuals (recorded since issue 22's first step)."
+        return "No records with move residuals (recorded since the residuals were added)."
     out = [
         "| task | agent | sensor | move | episodes | lateral mm, median / p90 | "
         "tilt deg, median / p90 |",

@@ -1,4 +1,4 @@
-"""Train OAKN or OPN on CPU: `python -m cfvs_maniskill.train --net oakn|opn --data FILE...`.
+"""Train OAKN or the fine network on CPU: `python -m cfvs_maniskill.train --net oakn|opnv|opn --data FILE...`.
 
 Resumable: the full training state is saved after every epoch to OUT.resume; a restarted
 run with the same arguments continues from the last finished epoch. At the end OUT holds

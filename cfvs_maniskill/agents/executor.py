@@ -4,7 +4,7 @@ Agents only decide *where* the peg should go; this module moves it there the sam
 all of them, so their success rates and servo times compare fairly.
 
 * Moves are straight lines in Cartesian space (slerp in rotation) at most `max_speed`
-  (0.25 m/s) and `max_turn` (90 deg/s): a cautious UR5 tool speed near parts. Every
+  (0.5 m/s) and `max_turn` (90 deg/s): half the UR5's tool speed, near parts. Every
   waypoint is solved by IK (Pinocchio, seeded by the previous one); an unreachable target is
   reported, never silently held.
 * Servo time is simulated time: control steps x 0.05 s.

@@ -104,10 +104,15 @@ def test_ablation_weights_are_chosen_by_how_they_were_trained():
     assert weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=False) == shipped
     aug = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR, augmentation=True)
     assert aug["oakn"].name == "oakn_aug.pt" and aug["oakn"].is_file()
+    assert aug["opn"].name == "opnv_aug.pt" and aug["opn"].is_file()
+    # The round OAKN was trained with augmentation, the round fine net without: each
+    # ablation swaps in the sibling trained the other way, and a missing one is named.
+    round_aug = weights_for("PegInsert3DoF", "round", WEIGHTS_DIR, augmentation=True)
+    assert round_aug["oakn"].name == "oakn.pt" and round_aug["opn"].name == "opnv_aug.pt"
     round_noaug = weights_for("PegInsert3DoF", "round", WEIGHTS_DIR, augmentation=False)
-    assert round_noaug["opn"].name == "opn_noaug.pt"
-    with pytest.raises(WeightsError, match="opn_noaug.pt: weights file not found"):
-        load_weights(round_noaug["opn"], ("opnv", "opn"), "round")
+    assert round_noaug["opn"].name == "opnv.pt"
+    with pytest.raises(WeightsError, match="oakn_noaug.pt: weights file not found"):
+        load_weights(round_noaug["oakn"], "oakn", "round")
 
 
 def test_missing_weights_name_the_file(make_env, tmp_path):

@@ -54,6 +54,11 @@ def main(args: BenchArgs) -> int:
         eval_scaling.measure(args.eval_per_object, ray_nodes=2 if args.ray else 0),
     )
     add("Start-up", startup.measure())
+    table = [
+        "| figure | measured | target | | note |",
+        "|---|---|---|---|---|",
+        *[f.row() for f in figures],
+    ]
     text = [
         "# Benchmark results",
         "",
@@ -61,14 +66,20 @@ def main(args: BenchArgs) -> int:
         f"{(time.perf_counter() - t0) / 60:.0f} min.",
         f"Machine: {machine()}.",
         "",
-        "| figure | measured | target | | note |",
-        "|---|---|---|---|---|",
-        *[f.row() for f in figures],
+        *table,
     ]
     for title, detail in sections:
         text += ["", f"## {title}", "", detail]
     RESULTS.write_text("\n".join(text) + "\n")
     print(f"wrote {RESULTS}")
+    # The README quotes the figure table: refreshed here, never pasted by hand.
+    from cfvs_maniskill.constants import PROJECT_ROOT
+    from cfvs_maniskill.report.tables import replace_marked
+
+    readme = PROJECT_ROOT / "README.md"
+    block = "\n".join(table)
+    readme.write_text(replace_marked(readme.read_text(), "bench", block, str(readme)))
+    print(f"filled the figure table into {readme}")
     return 0
 
 

@@ -1,0 +1,30 @@
+"""The README stays a guide (short, the two commands first) and no relative link in the
+documentation points at a file that does not exist."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *ROOT.glob("agents/*/README.md")]
+
+
+def test_readme_is_short_and_starts_with_the_two_commands():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 250
+    blocks = re.findall(r"```bash\n(.*?)```", text, flags=re.S)
+    assert (
+        "scripts/setup.sh" in blocks[0] and "cfvs_maniskill.run --task PegInsert6DoF" in blocks[0]
+    )
+    assert blocks[1].strip() == "bash scripts/test.sh"
+    assert (ROOT / ".ci" / "run").read_text().count("scripts/test.sh") >= 1
+
+
+def test_every_relative_link_resolves():
+    broken = []
+    for doc in DOCS:
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", doc.read_text()):
+            if "://" not in target and not (doc.parent / target).exists():
+                broken.append(f"{doc.relative_to(ROOT)} -> {target}")
+    assert not broken, broken

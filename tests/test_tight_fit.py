@@ -10,7 +10,15 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-from cfvs_maniskill.agents.force_insert import admittance_moment, spiral_pitch, tip_wrench
+from cfvs_maniskill.agents.force_insert import (
+    ForceInsertConfig,
+    Outcome,
+    Phase,
+    admittance_moment,
+    next_phase,
+    spiral_pitch,
+    tip_wrench,
+)
 from cfvs_maniskill.agents.oracle import OracleAgent
 from cfvs_maniskill.agents.registry import make_agent
 from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
@@ -84,11 +92,27 @@ def test_admittance_yields_to_the_measured_moment():
     moment = np.cross(corner, np.array([0.0, 0.0, 10.0]))
     wall = np.cross(np.array([-0.023, 0.0, 0.02]), np.array([8.0, 0.0, 0.0]))
     top = np.array([0.0, 0.0, 0.05])
-    for phase in ("rim", "passing", "hole"):
+    for phase in Phase:
         w = 0.003 * admittance_moment(phase, moment)
         assert (Rotation.from_rotvec(w).apply(corner) - corner)[2] > 1e-5, phase
         w = 0.003 * admittance_moment(phase, wall)
         assert (Rotation.from_rotvec(w).apply(top) - top)[0] > 1e-6, phase
+
+
+def test_insertion_phases_follow_travel_and_first_touch():
+    """RIM -> PASSING 1 mm past the first touch (not before a touch, not after a search
+    started); any phase -> HOLE 3 mm past the chamfer's end; only the insertion's own
+    failures fail the move (a searched spiral leaves the verdict to the score)."""
+    f, entry, chamfer = ForceInsertConfig(), 0.03, 0.0015
+    assert next_phase(Phase.RIM, 0.0305, entry, chamfer, None, False, f) is Phase.RIM
+    assert next_phase(Phase.RIM, 0.0305, entry, chamfer, 0.030, False, f) is Phase.RIM
+    assert next_phase(Phase.RIM, 0.0312, entry, chamfer, 0.030, False, f) is Phase.PASSING
+    assert next_phase(Phase.RIM, 0.0312, entry, chamfer, 0.030, True, f) is Phase.RIM
+    assert next_phase(Phase.PASSING, 0.0346, entry, chamfer, 0.030, False, f) is Phase.HOLE
+    assert next_phase(Phase.RIM, 0.0346, entry, chamfer, None, True, f) is Phase.HOLE
+    assert Outcome.ENDED.peg_is_in_place and Outcome.SPIRAL_EXHAUSTED.peg_is_in_place
+    assert not Outcome.TIMED_OUT.peg_is_in_place and not Outcome.UNREACHABLE.peg_is_in_place
+    assert Outcome.UNREACHABLE.reason == "insertion path unreachable"
 
 
 def test_wrist_wrench_moved_to_the_tip():

@@ -61,6 +61,12 @@ class ExecutorConfig:
     """Distance between the spiral's turns, m (below the clearance, so no gap is skipped)."""
     search_speed: float = 0.02
     """Sliding speed along the spiral, m/s."""
+    search_drop: float = 0.003
+    """The spiral stops once the peg has dropped this far (m) below where it stalled: it is
+    in the opening; straight down from there."""
+    rim_band: float = 0.005
+    """A stall short of the expected entry + this (m) means the peg sits on the rim (which
+    starts the search); deeper, it is at the bottom or stuck."""
     insertion: str = "auto"
     """position: the paper's insertion along the arm's current axis; force: force-guided
     insertion with admittance (`force_insert`); auto: force below `force_below_clearance`."""
@@ -101,6 +107,15 @@ class Executor:
         if self.cfg.insertion != "auto":
             return self.cfg.insertion
         return "force" if self.env.task.clearance < self.cfg.force_below_clearance else "position"
+
+    def step_towards(self, T: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, bool]:
+        """One insertion control step: IK for the tcp pose T from joint angles q, then a
+        step there with the velocity that gets there in one step. (joint angles, False)
+        when T has no IK solution (nothing is stepped)."""
+        q_new, ok = self.env.ik(T, q)
+        if ok:
+            self._step(q_new, (q_new - q) / self.dt)
+        return q_new, ok
 
     def _step(self, q: np.ndarray, qd: np.ndarray | None = None):
         """One control step towards joint positions q with joint velocities qd (rad/s)."""
@@ -169,12 +184,12 @@ class Executor:
         """
         if self.insertion_mode == "force":
             start = self.env.tcp_matrix() if self.last_target is None else self.last_target
-            steps, reason = force_insert(self, depth, entry, start, self.cfg.force)
+            steps, outcome = force_insert(self, depth, entry, start, self.cfg.force)
             q = self.env.agent.robot.get_qpos()[0].cpu().numpy()
             for _ in range(self.cfg.settle_steps):
                 self._step(q)
-            ok = reason in ("", "searched the whole spiral")  # the score says where it is
-            return MoveResult(ok, "" if ok else reason, steps + self.cfg.settle_steps)
+            ok = outcome.peg_is_in_place  # the score says where it is
+            return MoveResult(ok, "" if ok else outcome.reason, steps + self.cfg.settle_steps)
         T0 = self.env.tcp_matrix()
         axis = T0[:3, 2]
         q = self.env.agent.robot.get_qpos()[0].cpu().numpy()
@@ -187,7 +202,7 @@ class Executor:
             done = float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis)
             cmd = min(depth, cmd + self.cfg.insert_speed * self.dt, done + self.cfg.max_lead)
             if spiral is not None:
-                if done > spiral.stalled_at + 0.003:
+                if done > spiral.stalled_at + self.cfg.search_drop:
                     spiral = None  # dropped into the hole: straight down from here
                 else:
                     offset = spiral.step(self.dt)
@@ -196,14 +211,12 @@ class Executor:
                     lateral = T0[:3, :3] @ offset
             T = T0.copy()
             T[:3, 3] = T0[:3, 3] + cmd * axis + lateral
-            q_prev = q
-            q, ok = self.env.ik(T, q)
+            q, ok = self.step_towards(T, q)
             if not ok:
                 return MoveResult(False, "insertion path unreachable", self.steps - steps0)
-            self._step(q, (q - q_prev) / self.dt)
             history.append(float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis))
             if spiral is None and stalled(history, self.cfg.stall_steps):
-                on_rim = history[-1] < entry + 0.005
+                on_rim = history[-1] < entry + self.cfg.rim_band
                 if on_rim and self.cfg.search_radius > 0 and not np.any(lateral):
                     c = self.cfg
                     spiral = SpiralSearch(

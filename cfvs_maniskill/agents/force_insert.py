@@ -31,6 +31,7 @@ the oracle made 2/10 at 0.5 mm). Here instead, every control step:
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,6 +82,72 @@ class ForceInsertConfig:
     the shipped profiles: 0.1 N per axis)."""
     max_steps: int = 1200
     """Give up after this many control steps (60 s)."""
+    in_hole_past_chamfer: float = 0.003
+    """Travel past the end of the chamfer (m) from which the peg's full section is in the
+    hole (the `HOLE` phase)."""
+
+
+class Phase(enum.Enum):
+    """Where the peg is, as the wrist wrench and the travel tell it (module doc)."""
+
+    RIM = "rim"
+    """Not in the opening yet: on the flat rim, or short of it."""
+    PASSING = "passing the rim"
+    """The tip in the opening, the full section reaching the rim's edge."""
+    HOLE = "in the hole"
+    """The full section past the rim."""
+
+
+class Outcome(enum.Enum):
+    """How a force-guided insertion ended; `reason` is what the episode records."""
+
+    ENDED = ""
+    """The commanded depth was reached, or the peg stopped where it is (at the bottom, or
+    stuck): the task's score says which."""
+    SPIRAL_EXHAUSTED = "searched the whole spiral"
+    TIMED_OUT = "insertion timed out"
+    UNREACHABLE = "insertion path unreachable"
+
+    @property
+    def reason(self) -> str:
+        return self.value
+
+    @property
+    def peg_is_in_place(self) -> bool:
+        """The insertion itself did not fail: where the peg ended is for the score to say."""
+        return self in (Outcome.ENDED, Outcome.SPIRAL_EXHAUSTED)
+
+
+def next_phase(
+    phase: Phase,
+    travel: float,
+    entry: float,
+    chamfer: float,
+    contact_at: float | None,
+    searched: bool,
+    fcfg: ForceInsertConfig,
+) -> Phase:
+    """The phase after a control step that left the tip `travel` m along the insertion
+    line (`entry`: where the opening should be; `contact_at`: travel at the first touch)."""
+    if travel > entry + chamfer + fcfg.in_hole_past_chamfer:
+        return Phase.HOLE
+    if (
+        phase is Phase.RIM
+        and not searched
+        and contact_at is not None
+        and travel > contact_at + fcfg.passing_from
+    ):
+        return Phase.PASSING
+    return phase
+
+
+def stall_window(phase: Phase, travel: float, entry_zone: tuple[float, float], fcfg, cfg) -> int:
+    """Control steps without progress that count as a stall in this phase and place."""
+    if phase is not Phase.RIM:
+        return fcfg.stall_steps_in_hole
+    if entry_zone[0] <= travel <= entry_zone[1]:
+        return fcfg.stall_steps_at_entry
+    return cfg.stall_steps
 
 
 def spiral_pitch(search_pitch: float, clearance: float, chamfer: float) -> float:
@@ -88,7 +155,7 @@ def spiral_pitch(search_pitch: float, clearance: float, chamfer: float) -> float
     return min(search_pitch, chamfer + clearance / 2)
 
 
-def admittance_moment(phase: str, moment: np.ndarray) -> np.ndarray:
+def admittance_moment(phase: Phase, moment: np.ndarray) -> np.ndarray:
     """The moment (world, about the tip) the commanded pose turns along with: all of the
     measured one, in every phase (see the module doc for why not against it while passing
     the rim). `phase` is kept for the stall windows and the turn limit, which differ."""
@@ -114,10 +181,12 @@ def _turn_about_tip(C: np.ndarray, centre: np.ndarray, cmd: float, R: np.ndarray
     return centre + cmd * (z_before - C[:3, 2])
 
 
-def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: ForceInsertConfig):
+def force_insert(
+    executor, depth: float, entry: float, start: np.ndarray, fcfg: ForceInsertConfig
+) -> tuple[int, Outcome]:
     """Insert `depth` m along the commanded tcp pose `start` (4x4, world) with admittance.
 
-    Returns (steps taken, reason it ended: "" when the commanded depth was reached)."""
+    Returns (control steps taken, how it ended)."""
     env, cfg = executor.env, executor.cfg
     task = env.task
     pitch = spiral_pitch(cfg.search_pitch, task.clearance, task.peg_chamfer)
@@ -129,14 +198,14 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
     cmd, history, steps0 = 0.0, [0.0], executor.steps
     spiral: SpiralSearch | None = None
     lateral = np.zeros(3)
-    phase = "rim"  # -> "passing" (tip in the opening) -> "hole" (full section past the rim)
+    phase = Phase.RIM
     searched = False
     contact_at: float | None = None  # travel at the first touch
     # Tare: the peg is clear of the part here, so this reading is the sensor's offset.
     tare = env.wrist_wrench()
     while cmd < depth:
         if executor.steps - steps0 >= fcfg.max_steps:
-            return executor.steps - steps0, "insertion timed out"
+            return executor.steps - steps0, Outcome.TIMED_OUT
         tcp = env.tcp_matrix()  # forward kinematics
         flange = flange_pose(tcp)  # the peg's nominal length back along the axis
         force, moment = tip_wrench(env.wrist_wrench() - tare, flange, tcp[:3, 3])
@@ -158,49 +227,34 @@ def force_insert(executor, depth: float, entry: float, start: np.ndarray, fcfg: 
             centre = centre + (d * fcfg.max_lat_step / n if n > fcfg.max_lat_step else d)
         elif done > spiral.stalled_at + fcfg.drop:
             centre, lateral, spiral = centre + lateral, np.zeros(3), None
-            phase = "passing"  # dropped into the opening
+            phase = Phase.PASSING  # dropped into the opening
         else:
             offset = spiral.step(executor.dt)
             if offset is None:
-                return executor.steps - steps0, "searched the whole spiral"
+                return executor.steps - steps0, Outcome.SPIRAL_EXHAUSTED
             lateral = C[:3, :3] @ offset
         cmd = min(depth, cmd + cfg.insert_speed * executor.dt, done + cfg.max_lead)
         T = C.copy()
         T[:3, 3] = centre + cmd * z + lateral
-        q_prev = q
-        q, ok = env.ik(T, q)
+        q, ok = executor.step_towards(T, q)
         if not ok:
-            return executor.steps - steps0, "insertion path unreachable"
-        executor._step(q, (q - q_prev) / executor.dt)
+            return executor.steps - steps0, Outcome.UNREACHABLE
         now = float((env.tcp_matrix()[:3, 3] - origin) @ z)
         history.append(now)
-        if now > entry + task.peg_chamfer + 0.003:
-            phase = "hole"  # the full section (above the chamfer) 3 mm past the rim
-        elif (
-            phase == "rim"
-            and not searched
-            and contact_at is not None
-            and now > contact_at + fcfg.passing_from
-        ):
-            phase = "passing"
-        if phase != "rim":
-            k = fcfg.stall_steps_in_hole
-        elif entry_zone[0] <= now <= entry_zone[1]:
-            k = fcfg.stall_steps_at_entry
-        else:
-            k = cfg.stall_steps
+        phase = next_phase(phase, now, entry, task.peg_chamfer, contact_at, searched, fcfg)
+        k = stall_window(phase, now, entry_zone, fcfg, cfg)
         if spiral is None and stalled(history, k):
-            if phase != "hole" and cfg.search_radius > 0 and not searched:
+            if phase is not Phase.HOLE and cfg.search_radius > 0 and not searched:
                 # Short of the hole: on the rim, or a peg that slid off its edge into the
                 # chamfer and wedged there. Back to the start orientation (the travel is
                 # measured along the new axis), lay the face on the rim and search.
                 centre = _turn_about_tip(C, centre, cmd, start[:3, :3])
                 now = float((env.tcp_matrix()[:3, 3] - origin) @ C[:3, 2])
-                phase = "rim"
+                phase = Phase.RIM
                 spiral = SpiralSearch(
                     pitch, fcfg.search_speed, cfg.search_radius, now, min_radius=pitch / 4
                 )
                 searched = True
                 continue
             break  # at the bottom, or stuck
-    return executor.steps - steps0, ""
+    return executor.steps - steps0, Outcome.ENDED

@@ -18,15 +18,20 @@ def _oracle(env) -> Agent:
 
 
 def _cfvs(name: str = "cfvs", weights: str = "", **switches) -> Callable[..., Agent]:
-    """CFVS with config `switches`; `weights`: a folder under agents/cfvs/ (its tasks.yaml
-    says which files) instead of the shipped default."""
+    """CFVS with config `switches`; `weights`: a weights folder (its tasks.yaml says which
+    files), relative to agents/cfvs/ or absolute, instead of the shipped default."""
 
     def make(task: TaskSpec) -> Agent:
+        from pathlib import Path
+
         from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, CFVSConfig
 
+        cfg = dict(switches)
         if weights:
-            switches["weights_dir"] = WEIGHTS_DIR / weights
-        agent = CFVSAgent(task, CFVSConfig(**switches))
+            cfg["weights_dir"] = (
+                WEIGHTS_DIR / weights if not Path(weights).is_absolute() else Path(weights)
+            )
+        agent = CFVSAgent(task, CFVSConfig(**cfg))
         agent.name = name
         return agent
 

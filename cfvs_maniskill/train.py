@@ -20,7 +20,6 @@ import torch
 import tyro
 from tqdm import tqdm
 
-from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data.augment import AugmentConfig, augment
 from cfvs_maniskill.data.store import DatasetError, load_sets
 from cfvs_maniskill.nets.checkpoint import (
@@ -34,6 +33,7 @@ from cfvs_maniskill.nets.checkpoint import (
 from cfvs_maniskill.nets.oakn import OAKNConfig, oakn_loss, weighted_keypoints
 from cfvs_maniskill.nets.opn import OPNConfig, opn_loss
 from cfvs_maniskill.nets.pointnet2 import seed_sampling
+from cfvs_maniskill.perception import labels as L
 
 
 @dataclass

@@ -19,10 +19,10 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from cfvs_maniskill.data.images import DEPTH_RANGE
 from cfvs_maniskill.data.store import DatasetError, load_sets
 from cfvs_maniskill.nets.checkpoint import file_sha256, write_weights
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig, kovis_loss, motion_targets
+from cfvs_maniskill.perception.images import DEPTH_RANGE
 from cfvs_maniskill.train import cli_main, update
 
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
-from cfvs_maniskill.data.clouds import object_points, tool_to_world
+from cfvs_maniskill.perception.clouds import object_points, tool_to_world
 
 
 class TopFaceAgent(Agent):

@@ -13,11 +13,11 @@ import torch
 from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, weights_for
 from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import TaskSpec
-from cfvs_maniskill.data import labels as L
-from cfvs_maniskill.data.clouds import fine_crop, object_points, sample_fixed
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
 from cfvs_maniskill.nets.oakn import weighted_keypoints
+from cfvs_maniskill.perception import labels as L
+from cfvs_maniskill.perception.clouds import fine_crop, object_points, sample_fixed
 
 REFERENCE = Path(__file__).parent / "data" / "cfvs_reference.npz"
 """A real 6-DoF wrist cloud and the shipped networks' outputs on it. Regenerate after

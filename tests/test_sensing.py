@@ -296,7 +296,7 @@ def test_table_removal_follows_the_measured_noise(noise):
     noise, and a box standing on it: the fitted plane and noise are recovered, the table
     is removed whole, the box above the margin kept (a fixed 6 mm cut leaked the table at
     3 mm of noise)."""
-    from cfvs_maniskill.data.clouds import fit_table
+    from cfvs_maniskill.perception.clouds import fit_table
 
     rng = np.random.default_rng(0)
     xy = rng.uniform([0.3, -0.2], [0.7, 0.2], size=(20000, 2))

@@ -25,19 +25,19 @@ import yaml
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
-from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.constants import AGENTS_DIR
-from cfvs_maniskill.data import labels as L
-from cfvs_maniskill.data.clouds import (
+from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.nets.checkpoint import load_weights
+from cfvs_maniskill.nets.oakn import weighted_keypoints
+from cfvs_maniskill.perception import labels as L
+from cfvs_maniskill.perception.clouds import (
     MIN_OBJECT_POINTS,
     fine_crop,
     object_points,
     sample_fixed,
     tool_to_world,
 )
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
-from cfvs_maniskill.nets.checkpoint import load_weights
-from cfvs_maniskill.nets.oakn import weighted_keypoints
+from cfvs_maniskill.task_dof import constrain
 
 WEIGHTS_DIR = AGENTS_DIR / "cfvs"
 

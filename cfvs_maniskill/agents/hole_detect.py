@@ -26,10 +26,15 @@ from scipy import ndimage
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
-from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.constants import hole_half_extent
-from cfvs_maniskill.data.clouds import MIN_OBJECT_POINTS, fit_table, object_points, tool_to_world
 from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.perception.clouds import (
+    MIN_OBJECT_POINTS,
+    fit_table,
+    object_points,
+    tool_to_world,
+)
+from cfvs_maniskill.task_dof import constrain
 
 
 @dataclass

@@ -20,11 +20,11 @@ import torch
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec
-from cfvs_maniskill.agents.task_dof import constrain
 from cfvs_maniskill.constants import AGENTS_DIR
-from cfvs_maniskill.data import labels as L
-from cfvs_maniskill.data.images import wrist_images
 from cfvs_maniskill.nets.checkpoint import load_weights
+from cfvs_maniskill.perception import labels as L
+from cfvs_maniskill.perception.images import wrist_images
+from cfvs_maniskill.task_dof import constrain
 
 WEIGHTS_DIR = AGENTS_DIR / "kovis"
 MOTION_DIMS = {3: [0, 1, 2], 4: [0, 1, 2, 5], 6: [0, 1, 2, 3, 4, 5]}

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cfvs_maniskill.data.labels import hole_frame_from_keypoints
+from cfvs_maniskill.perception.labels import hole_frame_from_keypoints
 
 
 @dataclass(frozen=True)

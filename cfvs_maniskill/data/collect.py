@@ -28,17 +28,17 @@ import torch
 from tqdm import tqdm
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.data import labels as L
 from cfvs_maniskill.data import store
-from cfvs_maniskill.data.clouds import (
+from cfvs_maniskill.data.procedural import procedural_specs
+from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.perception import labels as L
+from cfvs_maniskill.perception.clouds import (
     MIN_OBJECT_POINTS,
     fine_crop,
     object_points,
     sample_fixed,
     world_to_tool,
 )
-from cfvs_maniskill.data.procedural import procedural_specs
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
 
 GROUP_SIZE = 12
 """Procedural bodies per simulator scene; the scene is rebuilt for the next group."""
@@ -223,8 +223,8 @@ class Collector:
         return row
 
     def _kovis(self, u, H, rng, i):
-        from cfvs_maniskill.agents.task_dof import constrain
-        from cfvs_maniskill.data.images import wrist_images
+        from cfvs_maniskill.perception.images import wrist_images
+        from cfvs_maniskill.task_dof import constrain
 
         task = self.task
         start = u.tcp_matrix()

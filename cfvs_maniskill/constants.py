@@ -26,6 +26,10 @@ DEFAULT_CLEARANCE = 0.004
 DEFAULT_HOLE_DEPTH = 0.045
 """Hole depth in every object (paper: 45 mm)."""
 
+DEFAULT_SEARCH_RADIUS = 0.008
+"""The compliant search's spiral radius, m, on every command (`--search-radius`; 0 = the
+paper's plain insertion)."""
+
 MIN_WALL = 0.003
 """Thinnest wall left between the hole and the body's side."""
 MIN_FLOOR = 0.003

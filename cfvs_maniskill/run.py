@@ -14,6 +14,9 @@ from typing import Literal
 
 import tyro
 
+from cfvs_maniskill.cli import fail as _fail
+from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
+
 
 @dataclass
 class RunArgs:
@@ -39,7 +42,7 @@ class RunArgs:
     """Append one JSON line per episode to this file."""
     video: Path | None = None
     """Write one mp4 per episode into this directory."""
-    search_radius: float = 0.008
+    search_radius: float = DEFAULT_SEARCH_RADIUS
     """Compliant spiral search when the peg stalls on the rim, up to this radius, metres
     (beyond the paper, as real assembly cells do; applies to every agent). 0: the paper's
     plain insertion."""
@@ -47,11 +50,6 @@ class RunArgs:
     """Sensor profile: a file in sensors/ (ideal: the paper's protocol; realistic: a
     D405-class stereo camera, 1.5 mm / 0.5 deg hand-eye error, a noisy wrist force/torque
     sensor) or a path to a profile file."""
-
-
-def _fail(message: str) -> None:
-    print(f"error: {message}", file=sys.stderr)
-    raise SystemExit(2)
 
 
 def resolve_task(name: str) -> str:

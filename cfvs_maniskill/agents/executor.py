@@ -24,6 +24,7 @@ import torch
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.force_insert import ForceInsertConfig, force_insert
 from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
+from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
 
 
 @dataclass
@@ -53,7 +54,7 @@ class ExecutorConfig:
     """A move that ends further than this (m) from its target is reported as not reached."""
     stall_steps: int = 6
     """Insertion ends when the tip advanced < 0.5 mm over this many steps."""
-    search_radius: float = 0.008
+    search_radius: float = DEFAULT_SEARCH_RADIUS
     """Compliant search (as real assembly cells do): when the peg stalls on the hole's rim,
     keep pressing lightly and slide it along a spiral of up to this radius (m) until it
     drops in. 0 = off (the paper's plain insertion)."""

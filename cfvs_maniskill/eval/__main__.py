@@ -16,6 +16,9 @@ from typing import Literal
 
 import tyro
 
+from cfvs_maniskill.cli import fail as _fail
+from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
+
 
 @dataclass
 class EvalArgs:
@@ -41,17 +44,12 @@ class EvalArgs:
     """Ray cluster address (HOST:PORT) with --backend ray; none: start a local Ray."""
     assets: tuple[Path, ...] = ()
     """Extra hole-object folders or files."""
-    search_radius: float = 0.008
+    search_radius: float = DEFAULT_SEARCH_RADIUS
     """Compliant search radius of the shared executor, metres (0: the paper's protocol)."""
     sensors: tuple[str, ...] = ("ideal",)
     """Sensor profiles, a grid dimension: names of files in sensors/ (ideal: the paper's
     protocol; realistic: a D405-class stereo camera, hand-eye error, a noisy wrist
     force/torque sensor) or paths to profile files."""
-
-
-def _fail(message: str) -> None:
-    print(f"error: {message}", file=sys.stderr)
-    raise SystemExit(2)
 
 
 def resolve(args: EvalArgs) -> dict[str, list[str]]:

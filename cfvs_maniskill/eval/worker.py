@@ -7,6 +7,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
 from cfvs_maniskill.eval.jobs import Job
 
 
@@ -15,7 +16,7 @@ class WorkerConfig:
     objects: dict[str, list[str]]
     """Objects per task (the env holds all of them; each job picks one)."""
     assets: list[str] = field(default_factory=list)
-    search_radius: float = 0.008
+    search_radius: float = DEFAULT_SEARCH_RADIUS
     sensor_files: dict[str, str] = field(default_factory=dict)
     """Sensor profile name -> the file it came from (profiles given as paths)."""
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
+
 
 @dataclass
 class Video:
@@ -42,7 +44,10 @@ def video_name(rec: dict) -> str:
 
 
 def render(
-    picks: list[dict], out: Path, assets: tuple[Path, ...] = (), search_radius: float = 0.008
+    picks: list[dict],
+    out: Path,
+    assets: tuple[Path, ...] = (),
+    search_radius: float = DEFAULT_SEARCH_RADIUS,
 ) -> list[Video]:
     """Replay each picked episode with an off-screen camera into OUT/<name>.mp4; files
     already there are kept (a second report run renders nothing again)."""

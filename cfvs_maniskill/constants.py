@@ -30,6 +30,21 @@ DEFAULT_SEARCH_RADIUS = 0.008
 """The compliant search's spiral radius, m, on every command (`--search-radius`; 0 = the
 paper's plain insertion)."""
 
+PRE_INSERT_HEIGHT = 0.03
+"""Pre-insertion pose: the peg tip this far above the hole's opening on its axis. Every
+agent servos to it before inserting; the data labels and the fine stage's goal use it."""
+INSERT_OVERSHOOT = 0.01
+"""The insertion commands the tip this far below the hole's bottom, so that contact (not a
+position target reached in mid-air) ends it."""
+
+SUCCESS_TIP_TOLERANCE = 0.005
+"""Success: the peg tip within 5 mm (along the hole axis) of the hole's bottom ..."""
+SUCCESS_LATERAL_MARGIN = 0.001
+"""... laterally inside the hole's cross-section, with this much slack for contact
+penetration of the simulated collision shapes ..."""
+SUCCESS_MAX_TILT_DEG = 10.0
+"""... and the peg axis within 10 degrees of the hole axis."""
+
 MIN_WALL = 0.003
 """Thinnest wall left between the hole and the body's side."""
 MIN_FLOOR = 0.003

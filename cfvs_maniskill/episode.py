@@ -11,10 +11,7 @@ import numpy as np
 from cfvs_maniskill.agents.base import Agent, Observation
 from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import robot_view
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
-
-INSERT_OVERSHOOT = 0.01
-"""The insertion is commanded 1 cm past the hole's bottom; the bottom stops it."""
+from cfvs_maniskill.constants import INSERT_OVERSHOOT, PRE_INSERT_HEIGHT
 
 
 @dataclass

@@ -17,11 +17,11 @@ import pytest
 import torch
 
 from cfvs_maniskill import geometry as G
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.data.augment import AugmentConfig, augment
 from cfvs_maniskill.data.collect import CollectArgs, collect
 from cfvs_maniskill.data.procedural import procedural_specs
 from cfvs_maniskill.data.store import DatasetError, load
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import tool_to_world

@@ -11,8 +11,7 @@ import yaml
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-from cfvs_maniskill.constants import SENSORS_DIR
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, SENSORS_DIR
 from cfvs_maniskill.robots.ur5 import CAMERA_UID, camera_pose_in_tool
 from cfvs_maniskill.sensing.depth import apply_stereo, discontinuity_jump, edge_mask, grid_points
 from cfvs_maniskill.sensing.model import SAPIEN_CAM_TO_GL, mount_error

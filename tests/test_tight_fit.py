@@ -22,8 +22,7 @@ from cfvs_maniskill.agents.force_insert import (
 from cfvs_maniskill.agents.oracle import OracleAgent
 from cfvs_maniskill.agents.registry import make_agent
 from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
-from cfvs_maniskill.constants import PEG_LENGTH, SQUARE_PEG_SIDE, TASKS_DIR
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import PEG_LENGTH, PRE_INSERT_HEIGHT, SQUARE_PEG_SIDE, TASKS_DIR
 from cfvs_maniskill.envs.task_config import TaskConfigError, load_task
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.robots.ur5 import chamfered_peg_mesh

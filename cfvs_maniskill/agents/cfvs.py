@@ -25,8 +25,7 @@ import yaml
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
-from cfvs_maniskill.constants import AGENTS_DIR
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import AGENTS_DIR, PRE_INSERT_HEIGHT
 from cfvs_maniskill.nets.checkpoint import load_weights
 from cfvs_maniskill.nets.oakn import weighted_keypoints
 from cfvs_maniskill.perception import labels as L

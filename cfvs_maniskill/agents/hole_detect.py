@@ -26,8 +26,7 @@ from scipy import ndimage
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
-from cfvs_maniskill.constants import hole_half_extent
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, hole_half_extent
 from cfvs_maniskill.perception.clouds import (
     MIN_OBJECT_POINTS,
     fit_table,

@@ -22,7 +22,7 @@ import trimesh
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.perception.clouds import MIN_OBJECT_POINTS, object_points, tool_to_world

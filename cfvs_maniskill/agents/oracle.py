@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 
 
 class OracleAgent(Agent):

@@ -28,9 +28,9 @@ import torch
 from tqdm import tqdm
 
 from cfvs_maniskill import geometry as G
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.data import store
 from cfvs_maniskill.data.procedural import procedural_specs
-from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import (
     MIN_OBJECT_POINTS,

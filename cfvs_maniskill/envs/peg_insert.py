@@ -16,7 +16,14 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.interface import flange_pose, insertion_pose
-from cfvs_maniskill.constants import hole_half_extent, peg_half_extent
+from cfvs_maniskill.constants import (
+    PRE_INSERT_HEIGHT,
+    SUCCESS_LATERAL_MARGIN,
+    SUCCESS_MAX_TILT_DEG,
+    SUCCESS_TIP_TOLERANCE,
+    hole_half_extent,
+    peg_half_extent,
+)
 from cfvs_maniskill.envs.task_config import TaskConfig, load_tasks
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
@@ -26,11 +33,6 @@ from cfvs_maniskill.sensing.depth import grid_points
 from cfvs_maniskill.sensing.model import GL_TO_CV, SensorModel
 from cfvs_maniskill.sensing.profile import load_profile
 
-PRE_INSERT_HEIGHT = 0.03
-"""Pre-insertion pose: the peg tip this far above the hole's opening on its axis, metres."""
-SUCCESS_TIP_TOLERANCE = 0.005
-"""The tip must be within 5 mm of the hole's bottom."""
-SUCCESS_MAX_TILT_DEG = 10.0
 PARK = np.array([0.0, 5.0, -3.0])
 """Unused hole objects wait here, out of every camera's view."""
 MAX_INIT_TRIES = 100
@@ -470,7 +472,8 @@ class PegInsertEnv(BaseEnv):
         tilt = float(np.degrees(np.arccos(np.clip(-T[2, 2], -1, 1))))
         room = hole_half_extent(cfg.peg, cfg.clearance) - peg_half_extent(cfg.peg)
         inside = (
-            lateral <= room * np.sqrt(2) + 0.001 and max(abs(tip[0]), abs(tip[1])) <= room + 0.001
+            lateral <= room * np.sqrt(2) + SUCCESS_LATERAL_MARGIN
+            and max(abs(tip[0]), abs(tip[1])) <= room + SUCCESS_LATERAL_MARGIN
         )
         success = (
             abs(tip_to_bottom) <= SUCCESS_TIP_TOLERANCE and inside and tilt <= SUCCESS_MAX_TILT_DEG

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 
 KEYPOINT_SPACING = 0.05
 """Distance of k2 and k3 from k1, metres."""
@@ -136,8 +137,6 @@ def fine_keypoints(action: np.ndarray) -> np.ndarray:
     """A fine sample's keypoints (tool frame) from its action: the target pre-insertion
     tool frame is PRE_INSERT_HEIGHT above the hole's centre, its z into the hole, its x the
     hole's canonical x."""
-    from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
-
     T = apply_action(np.eye(4), np.asarray(action, np.float64))
     c = T[:3, 3] + PRE_INSERT_HEIGHT * T[:3, 2]
     s = KEYPOINT_SPACING
@@ -148,8 +147,6 @@ def fine_action_from_keypoints(k: np.ndarray) -> np.ndarray:
     """Voted fine keypoints (tool frame, k2 symmetry-encoded) -> the offset (dt, dr) to the
     pre-insertion pose above the hole, facing into it. Inverse of `fine_keypoints` +
     `encode_symmetric_x`."""
-    from cfvs_maniskill.envs.peg_insert import PRE_INSERT_HEIGHT
-
     H = decode_symmetric_x(k)
     R = H[:3, :3] @ np.diag([1.0, -1.0, -1.0])  # tool z into the hole, tool x = hole x
     return fine_action(np.eye(4), G.make(R, H[:3, 3] + PRE_INSERT_HEIGHT * H[:3, 2]))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,6 +13,9 @@ from cfvs_maniskill.agents.base import Agent, Observation
 from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import robot_view
 from cfvs_maniskill.constants import INSERT_OVERSHOOT, PRE_INSERT_HEIGHT
+
+if TYPE_CHECKING:
+    from cfvs_maniskill.rendering.film import Film
 
 
 @dataclass
@@ -75,19 +79,32 @@ def observe(env, obs) -> Observation:
     )
 
 
-def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict | None = None):
-    """Reset with `seed`, let the agent decide until it inserts or gives up, and score it."""
+def run_episode(
+    env,
+    agent: Agent,
+    executor: Executor,
+    seed: int,
+    options: dict | None = None,
+    film: Film | None = None,
+):
+    """Reset with `seed`, let the agent decide until it inserts or gives up, and score it.
+    With `film`, the episode is filmed too (the caller writes the video)."""
     t0 = time.perf_counter()
     u = env.unwrapped
     obs, _ = env.reset(seed=seed, options=options or {})
     agent.reset(seed)
     executor.reset()
+    if film is not None:
+        film.start()
+        executor.on_step = film.on_step
     reason = ""
     inserted = False
     residuals: list[list[float]] = []
     try:
-        for _ in range(agent.max_decisions):
+        for k in range(agent.max_decisions):
             action = agent.act(observe(env, obs))
+            if film is not None:
+                film.note(agent.phase or f"{action.kind} {k + 1}", agent.estimate)
             if action.kind == "give_up":
                 reason = f"agent gave up: {action.reason}"
                 break
@@ -114,6 +131,9 @@ def run_episode(env, agent: Agent, executor: Executor, seed: int, options: dict 
     success = bool(m["success"]) and inserted
     if not success and not reason:
         reason = failure_reason(m, u.task.hole_depth)
+    if film is not None:
+        executor.on_step = None
+        film.finish(executor.servo_time, "success" if success else f"failure: {reason}")
     clean = {k: (v if math.isfinite(v) else float("nan")) for k, v in m.items()}
     return EpisodeResult(
         task=u.task.name,

@@ -41,7 +41,10 @@ class RunArgs:
     out: Path | None = None
     """Append one JSON line per episode to this file."""
     video: Path | None = None
-    """Write one mp4 per episode into this directory."""
+    """Write one mp4 per episode into this directory: a lit close view of the hole, an
+    overview and the wrist camera with the agent's estimated hole frame, captioned with the
+    phase, the contact force and the outcome (about 20-40 s of rendering per episode on a
+    2-core CPU; docs/videos.md)."""
     search_radius: float = DEFAULT_SEARCH_RADIUS
     """Compliant spiral search when the peg stalls on the rim, up to this radius, metres
     (beyond the paper, as real assembly cells do; applies to every agent). 0: the paper's
@@ -93,25 +96,17 @@ def main(args: RunArgs) -> list:
         init_error=args.init_error,
         sensor=args.sensor,
     )
-    if args.video:
-        kwargs["render_mode"] = "rgb_array"
     try:
         env = gym.make(env_id, **kwargs)
     except SelectionError as e:
         _fail(str(e))
     except FileNotFoundError as e:
         _fail(str(e))
+    film = None
     if args.video:
-        from mani_skill.utils.wrappers.record import RecordEpisode
+        from cfvs_maniskill.rendering.film import Film
 
-        env = RecordEpisode(
-            env,
-            output_dir=str(args.video),
-            save_trajectory=False,
-            save_video=True,
-            video_fps=20,
-            max_steps_per_video=None,
-        )
+        film = Film(env, args.agent)
     executor = Executor(env, ExecutorConfig(search_radius=args.search_radius))
     from cfvs_maniskill.nets.checkpoint import WeightsError
 
@@ -124,8 +119,12 @@ def main(args: RunArgs) -> list:
     results = []
     bar = tqdm(range(args.episodes), desc=f"{args.agent} on {env_id}", unit="ep", file=sys.stderr)
     for i in bar:
-        r = run_episode(env, agent, executor, seed=args.seed + i)
+        r = run_episode(env, agent, executor, seed=args.seed + i, film=film)
         results.append(r)
+        if film is not None:
+            name = f"{env_id.removesuffix('-v1')}_{args.agent}_seed{r.seed}.mp4"
+            path = film.write(args.video / name.replace(":", "_").replace("/", "_"))
+            tqdm.write(f"  video {path} ({len(film.frames)} frames, {film.render_s:.0f} s)")
         line = (
             f"episode {i:4d} seed {r.seed:6d} {r.object:20s} "
             f"{'success' if r.success else 'FAIL   '} servo {r.servo_time_s:5.2f} s"

@@ -78,3 +78,5 @@ def test_video_is_a_playable_mp4(tmp_path):
     )
     frames = [int(n) for n in re.findall(r"frame=\s*(\d+)", probe.stderr)]
     assert frames and frames[-1] > 20
+    w, h = map(int, re.search(r", (\d{3,})x(\d{3,})", probe.stderr).groups())
+    assert h >= 512 and w > h  # the close view beside the overview and the wrist view

@@ -54,6 +54,11 @@ class Agent(abc.ABC):
     max_decisions: int = 30
     privileged: bool = False
     """True only for the oracle, which is handed the env and reads true poses."""
+    phase: str = ""
+    """For videos' captions only: what the last `act` did (e.g. "coarse (OAKN)")."""
+    estimate: np.ndarray | None = None
+    """For videos only: the agent's current estimate of the hole frame (4x4, world; origin
+    at the opening's centre, z out of the hole), drawn into the wrist view; None: none."""
 
     def reset(self, seed: int) -> None:  # noqa: B027  (optional hook)
         """Called once per episode with the episode's seed (for the agent's own randomness:

@@ -104,10 +104,10 @@ class CFVSAgent(Agent):
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
-        self.last_estimate: np.ndarray | None = None
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
+        self.phase, self.estimate = "", None
         # Point subsets are random; seeded from the episode's seed, the same env seed gives
         # the same episode.
         self.rng = np.random.default_rng(seed)
@@ -155,7 +155,7 @@ class CFVSAgent(Agent):
             H = self.estimate_hole(xyzw, tcp)
             if H is None or not np.all(np.isfinite(H)):
                 return Action.give_up("OAKN: the camera sees no hole object")
-            self.last_estimate = H
+            self.phase, self.estimate = "coarse: OAKN keypoints -> hole frame", H
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
             pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, tcp)
             return Action.move(self.constrain(pose, tcp))
@@ -169,7 +169,11 @@ class CFVSAgent(Agent):
                 np.linalg.norm(a[:3]) < self.cfg.tol_translation
                 and np.degrees(np.linalg.norm(a[3:])) < self.cfg.tol_rotation_deg
             )
+            target = L.apply_action(tcp, a)
+            self.estimate = L.hole_frame_from_pre_insertion(target)
             if not small:
                 self.fine_steps += 1
-                return Action.move(L.apply_action(tcp, a))
+                self.phase = f"fine iteration {self.fine_steps}: OPN offset"
+                return Action.move(target)
+        self.phase = "insertion"
         return Action.insert()

@@ -16,6 +16,7 @@ all of them, so their success rates and servo times compare fairly.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -88,6 +89,10 @@ class Executor:
         self.last_obs = None
         self.last_target: np.ndarray | None = None
         """The last pose `move_to` commanded (where the arm is converging to)."""
+        self.phase = ""
+        """What the insertion is doing (for videos' captions): set by `insert`."""
+        self.on_step: Callable[[Executor], None] | None = None
+        """Called after every control step (a video films from it); None: nothing."""
         if self.cfg.insertion not in ("auto", "position", "force"):
             raise ValueError(
                 f"ExecutorConfig.insertion: expected auto | position | force, "
@@ -102,6 +107,7 @@ class Executor:
     def reset(self) -> None:
         self.steps = 0
         self.last_target = None
+        self.phase = ""
 
     @property
     def insertion_mode(self) -> str:
@@ -131,6 +137,8 @@ class Executor:
         finally:
             self.env.defer_obs = False
         self.steps += 1
+        if self.on_step is not None:
+            self.on_step(self)
         if not np.all(np.isfinite(self.env.agent.robot.get_qpos().cpu().numpy())):
             raise FloatingPointError("simulation state became NaN")
 
@@ -200,6 +208,7 @@ class Executor:
         lateral = np.zeros(3)
         spiral: SpiralSearch | None = None  # search state once started
         while cmd < depth:
+            self.phase = "insertion" if spiral is None else "search: spiral on the rim"
             done = float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis)
             cmd = min(depth, cmd + self.cfg.insert_speed * self.dt, done + self.cfg.max_lead)
             if spiral is not None:

@@ -204,6 +204,9 @@ def force_insert(
     # Tare: the peg is clear of the part here, so this reading is the sensor's offset.
     tare = env.wrist_wrench()
     while cmd < depth:
+        executor.phase = (
+            f"insertion (force): {phase.value}" if spiral is None else "search: spiral on the rim"
+        )
         if executor.steps - steps0 >= fcfg.max_steps:
             return executor.steps - steps0, Outcome.TIMED_OUT
         tcp = env.tcp_matrix()  # forward kinematics

@@ -162,6 +162,7 @@ class HoleDetectAgent(Agent):
 
     def reset(self, seed: int) -> None:
         self.moved = False
+        self.phase, self.estimate = "", None
 
     def act(self, observation: Observation) -> Action:
         if self.moved:
@@ -179,5 +180,6 @@ class HoleDetectAgent(Agent):
         if hole is None:
             return Action.give_up("3DRHD: no hole-sized enclosed gap on any plane of the scene")
         self.moved = True
+        self.phase, self.estimate = "3DRHD: hole detected on a plane", hole.frame
         pose = insertion_pose(task.peg, hole.frame, -PRE_INSERT_HEIGHT, tcp)
         return Action.move(constrain(task, pose, tcp))

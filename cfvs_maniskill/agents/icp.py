@@ -87,6 +87,7 @@ class ICPAgent(Agent):
 
     def reset(self, seed: int) -> None:
         self.moved = False
+        self.phase, self.estimate = "", None
         if self.oakn is not None:
             self.oakn.reset(seed)
 
@@ -136,5 +137,6 @@ class ICPAgent(Agent):
             )
         H = T_obj @ self.model_hole
         self.moved = True
+        self.phase, self.estimate = f"{self.name}: model registered", H
         pose = insertion_pose(self.task.peg, H, -PRE_INSERT_HEIGHT, tcp)
         return Action.move(constrain(self.task, pose, tcp))

@@ -36,6 +36,13 @@ from cfvs_maniskill.sensing.profile import load_profile
 PARK = np.array([0.0, 5.0, -3.0])
 """Unused hole objects wait here, out of every camera's view."""
 MAX_INIT_TRIES = 100
+CLOSEUP_CAMERA = "closeup"
+OVERVIEW_CAMERA = "overview"
+CLOSEUP_PX = 512
+CLOSEUP_FOV = 0.75
+CLOSEUP_DISTANCE = 0.40
+"""The close view: 512 px, 43 deg, 40 cm from the hole's opening (a 30 cm wide view: the
+object's top, the peg and the last part of its approach)."""
 
 
 def _quat_wxyz(T: np.ndarray) -> np.ndarray:
@@ -168,10 +175,54 @@ class PegInsertEnv(BaseEnv):
 
     @property
     def _default_human_render_camera_configs(self):
-        pose = sapien_utils.look_at(eye=[1.05, 0.55, 0.55], target=[0.45, 0.0, 0.12])
-        return CameraConfig(
-            "render_camera", pose=pose, width=256, height=256, fov=0.9, near=0.01, far=10
-        )
+        # For people (videos, `render()`), never for agents: a close view that follows the
+        # hole (aimed at every reset, `_aim_closeup`) and an overview of the arm, with
+        # ManiSkill's lit "default" shader (the wrist camera keeps the fast "minimal" one).
+        return [
+            CameraConfig(
+                CLOSEUP_CAMERA,
+                pose=sapien.Pose(),
+                width=CLOSEUP_PX,
+                height=CLOSEUP_PX,
+                fov=CLOSEUP_FOV,
+                near=0.01,
+                far=10,
+                shader_pack="default",
+            ),
+            CameraConfig(
+                OVERVIEW_CAMERA,
+                pose=sapien.Pose(),
+                width=CLOSEUP_PX // 2,
+                height=CLOSEUP_PX // 2,
+                fov=0.9,
+                near=0.01,
+                far=10,
+                shader_pack="default",
+            ),
+        ]
+
+    def _aim_cameras(self) -> None:
+        """Aim the render cameras at this episode's hole. The close view looks at the
+        opening from above, 55 deg off the hole's axis to the side (across the arm's
+        approach, which would block it); the overview frames the arm's base and the hole
+        from above that side, so the table, not the sky, is behind the arm."""
+        H = self.hole_pose
+        centre, z = H[:3, 3], H[:3, 2]
+        out = centre - [0.0, 0.0, centre[2]]  # the base -> hole direction on the table
+        side = np.cross([0.0, 0.0, 1.0], out)
+        side = side / (np.linalg.norm(side) + 1e-9)
+        look = np.cos(np.radians(55)) * z + np.sin(np.radians(55)) * side
+        views = {
+            CLOSEUP_CAMERA: (centre + CLOSEUP_DISTANCE * look, centre),
+            OVERVIEW_CAMERA: (
+                0.5 * centre + 0.75 * side + [0.0, 0.0, 0.8],
+                0.6 * centre + [0.0, 0.0, 0.1],
+            ),
+        }
+        for name, (eye, target) in views.items():
+            cam = self._human_render_cameras.get(name)
+            if cam is not None:  # None: the user replaced the render cameras
+                cam.camera.set_local_pose(sapien_utils.look_at(eye=eye, target=target).sp)
 
     def _load_agent(self, options: dict):
         super()._load_agent(options, sapien.Pose())
@@ -217,7 +268,7 @@ class PegInsertEnv(BaseEnv):
         return flange_pose(self.tcp_matrix())
 
     def contact_wrench(self, flange: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Ground truth (tests only): the summed wrench of all the peg's contacts in the last
+        """Ground truth (tests and videos, never agents): the summed wrench of all the peg's contacts in the last
         physics step, world frame: force (N) and its moment (N m) about the flange (its pose
         `flange`, default the current one)."""
         origin = (self.flange_matrix() if flange is None else flange)[:3, 3]
@@ -317,6 +368,7 @@ class PegInsertEnv(BaseEnv):
             obj.set_pose(G.to_pose(T_obj) if i == idx else sapien.Pose(p=PARK + [0, i, 0]))
         self._show_only(idx)
         self.object_index = idx
+        self._aim_cameras()
         self._init_error_m = float(np.linalg.norm(T_start[:3, 3] - H[:3, 3]))
         qt = torch.as_tensor(q0, dtype=torch.float32)[None]
         self.agent.reset(qt)
@@ -387,6 +439,7 @@ class PegInsertEnv(BaseEnv):
             self._init_error_m = float(np.asarray(task["init_error"]).reshape(-1)[0])
         self.object_index = self._active_object()
         self._show_only(self.object_index)
+        self._aim_cameras()
         self.episode_info = self._describe_episode()
 
     def set_state(self, state, env_idx: torch.Tensor | None = None):

@@ -150,3 +150,12 @@ def fine_action_from_keypoints(k: np.ndarray) -> np.ndarray:
     H = decode_symmetric_x(k)
     R = H[:3, :3] @ np.diag([1.0, -1.0, -1.0])  # tool z into the hole, tool x = hole x
     return fine_action(np.eye(4), G.make(R, H[:3, 3] + PRE_INSERT_HEIGHT * H[:3, 2]))
+
+
+def hole_frame_from_pre_insertion(T: np.ndarray) -> np.ndarray:
+    """The hole frame (origin at the opening, z out of the hole) that the pre-insertion tcp
+    pose T (4x4, tool z into the hole, x the hole's x) stands PRE_INSERT_HEIGHT above."""
+    H = np.eye(4)
+    H[:3, :3] = T[:3, :3] @ np.diag([1.0, -1.0, -1.0])
+    H[:3, 3] = T[:3, 3] + PRE_INSERT_HEIGHT * T[:3, 2]
+    return H

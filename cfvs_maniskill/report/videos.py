@@ -49,19 +49,20 @@ def render(
     assets: tuple[Path, ...] = (),
     search_radius: float = DEFAULT_SEARCH_RADIUS,
 ) -> list[Video]:
-    """Replay each picked episode with an off-screen camera into OUT/<name>.mp4; files
-    already there are kept (a second report run renders nothing again)."""
+    """Replay each picked episode, filmed (`rendering/film.py`, as `run --video`), into
+    OUT/<name>.mp4; files already there are kept (a second report run renders nothing
+    again)."""
     import gymnasium as gym
-    from mani_skill.utils.wrappers.record import RecordEpisode
     from tqdm import tqdm
 
     import cfvs_maniskill  # noqa: F401  (render device, task registration)
     from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
     from cfvs_maniskill.agents.registry import agent_obs_mode, make_agent
     from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.rendering.film import Film
 
     out.mkdir(parents=True, exist_ok=True)
-    envs: dict[tuple[str, str, str], RecordEpisode] = {}
+    envs: dict[tuple[str, str, str], object] = {}
     objects: dict[str, set[str]] = {}
     for r in picks:
         objects.setdefault(r["task"], set()).add(r["object"])
@@ -77,36 +78,28 @@ def render(
         sensor = rec.get("sensor", "ideal")
         key = (rec["task"], obs_mode, sensor)
         if key not in envs:
-            env = gym.make(
+            envs[key] = gym.make(
                 f"{rec['task']}-v1",
                 obs_mode=obs_mode,
                 sensor=sensor,
                 objects=sorted(objects[rec["task"]]),
                 assets=[str(a) for a in assets],
-                render_mode="rgb_array",
-            )
-            envs[key] = RecordEpisode(
-                env,
-                output_dir=str(out),
-                save_trajectory=False,
-                save_on_reset=False,
-                video_fps=20,
             )
         env = envs[key]
         u = env.unwrapped
         u.init_error_m = u.task.init_error[rec["init"]]
         radius = rec.get("search_radius_m", search_radius)
+        film = Film(env, rec["label"])
         try:
             agent = make_agent(rec["agent"], env)
             executor = Executor(env, ExecutorConfig(search_radius=radius))
             options = {"object": rec["object"]}
-            r = run_episode(env, agent, executor, rec["seed"], options=options)
+            r = run_episode(env, agent, executor, rec["seed"], options=options, film=film)
         except Exception as e:  # e.g. missing weights, an object this env lacks
             tqdm.write(f"{path.stem}: not rendered: {e}")
-            env.flush_video(save=False)
             videos.append(Video(rec, None, False, f"not rendered: {e}"))
             continue
-        env.flush_video(name=path.stem)
+        film.write(path)
         meta.write_text(f"{'success' if r.success else 'failure'} {r.reason}\n")
         videos.append(Video(rec, path, r.success, r.reason))
     for env in envs.values():

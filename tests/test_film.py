@@ -1,0 +1,71 @@
+"""Episode videos (`rendering/film.py`): a filmed episode is the episode that was scored,
+and its frames are pictures a person can read (size, views, captions)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
+from cfvs_maniskill.agents.registry import make_agent
+from cfvs_maniskill.envs.peg_insert import CLOSEUP_PX
+from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.rendering.film import CAPTION_PX, Film, project
+
+
+def _record(r) -> dict:
+    d = r.to_json()
+    d.pop("wall_time_s")
+    return d
+
+
+@pytest.mark.slow
+def test_filming_does_not_change_the_episode(make_env, tmp_path):
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud", sensor="realistic")
+    agent = make_agent("cfvs", env)
+    executor = Executor(env, ExecutorConfig())
+    plain = run_episode(env, agent, executor, seed=11)
+    film = Film(env, "cfvs")
+    filmed = run_episode(env, agent, executor, seed=11, film=film)
+    # Same seed, noisy sensor: equal only if the film drew nothing from the sensing streams.
+    assert _record(filmed) == _record(plain)
+
+    frames = np.stack(film.frames)
+    assert frames.shape[1:] == (CLOSEUP_PX + CAPTION_PX, CLOSEUP_PX * 3 // 2, 3)
+    close = frames[:, :CLOSEUP_PX, :CLOSEUP_PX].astype(np.float64)
+    assert close.std() > 10  # a shaded scene, not one flat colour
+    assert np.abs(close[0] - close[-1]).mean() > 1  # the peg moved into view
+    caption = frames[:, CLOSEUP_PX:]
+    assert (caption > 200).any(axis=(1, 2, 3)).all()  # white text on every frame
+    assert film.captions[0].startswith("coarse")
+    assert any(c.startswith("fine iteration 1") for c in film.captions)
+    assert any(c.startswith("insertion") for c in film.captions)
+    assert film.captions[-1] == ("success" if filmed.success else f"failure: {filmed.reason}")
+
+    path = film.write(tmp_path / "episode.mp4")
+    import imageio.v2 as imageio
+
+    with imageio.get_reader(path) as reader:
+        first = reader.get_data(0)
+        n = reader.count_frames()
+    assert first.shape[0] >= 512 and n == len(film.frames)
+
+
+@pytest.mark.slow
+def test_a_tight_fit_film_names_the_force_phases(make_env):
+    env = make_env("PegInsert6DoF-1mm-v1", obs_mode="pointcloud")
+    film = Film(env, "oracle")
+    agent = make_agent("oracle", env)
+    run_episode(env, agent, Executor(env, ExecutorConfig()), seed=2, film=film)
+    assert any(c.startswith("insertion (force)") for c in film.captions)
+
+
+def test_projection_puts_a_point_on_the_optical_axis_at_the_principal_point():
+    K = np.array([[100.0, 0, 64], [0, 100.0, 48], [0, 0, 1]])
+    ext = np.hstack([np.eye(3), np.zeros((3, 1))])  # camera at the origin, looking along +z
+    uv = project(
+        np.array([[0.0, 0.0, 2.0], [0.1, 0.0, 1.0], [0.0, 0.0, -1.0]]),
+        {"extrinsic_cv": ext, "intrinsic_cv": K},
+    )
+    assert np.allclose(uv[0], [64, 48]) and np.allclose(uv[1], [74, 48])
+    assert np.isnan(uv[2]).all()  # behind the camera: not drawn

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cfvs_maniskill.report import style
 from cfvs_maniskill.report.plots import _save, plt
 
 MAX_MOVES = 9
@@ -43,23 +44,39 @@ def table(records: list[dict]) -> str:
 
 
 def plot(records: list[dict], out: Path, agent: str = "cfvs") -> Path | None:
-    """p90 lateral and tilt error after each move of `agent`, one line per task x sensor."""
+    """p90 lateral (top) and tilt (bottom) error after each move of `agent`: a column per
+    sensor profile, a line per task (at most `style.MAX_LINES` per panel)."""
     cells = _by_move([r for r in records if r["label"] == agent])
     if not cells:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for task, sensor in sorted({(t, s) for t, _, s, _ in cells}):
-        moves = sorted(k for t, _, s, k in cells if (t, s) == (task, sensor))
-        p90 = np.array(
-            [np.percentile(np.asarray(cells[(task, agent, sensor, k)]), 90, axis=0) for k in moves]
-        )
-        for ax, col in zip(axes, (0, 1), strict=True):
-            ax.plot(moves, p90[:, col], marker="o", label=f"{task} {sensor}")
-    for ax, what in zip(axes, ("lateral error p90, mm", "tilt error p90, deg"), strict=True):
-        ax.set_xlabel("move (1 = coarse, then fine iterations)")
-        ax.set_ylabel(what)
-        ax.axhline(1.0, color="grey", lw=0.8, ls="--")
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    sensors = sorted({s for _, _, s, _ in cells}, key=lambda s: (s != "ideal", s))
+    tasks = sorted({t for t, _, _, _ in cells})[: style.MAX_LINES]
+    colours = dict(zip(tasks, style.COLOURS + style.EXTRA_COLOURS, strict=False))
+    fig, axes = plt.subplots(
+        2, len(sensors), figsize=(4.2 * len(sensors), 6), squeeze=False, sharey="row"
+    )
+    for c, sensor in enumerate(sensors):
+        for i, task in enumerate(tasks):
+            moves = sorted(k for t, _, s, k in cells if (t, s) == (task, sensor))
+            if not moves:
+                continue
+            p90 = np.array(
+                [
+                    np.percentile(np.asarray(cells[(task, agent, sensor, k)]), 90, axis=0)
+                    for k in moves
+                ]
+            )
+            for row in (0, 1):
+                axes[row][c].plot(
+                    moves, p90[:, row], color=colours[task], marker=style.MARKERS[i], label=task
+                )
+        for row, what in enumerate(("lateral error p90, mm", "tilt error p90, deg")):
+            ax = axes[row][c]
+            ax.axhline(1.0, color="grey", lw=0.8, ls="--")  # the 1 mm / 1 deg target
+            ax.grid(alpha=0.3)
+            ax.set_ylabel(what)
+            ax.set_xlabel("move (1 = coarse, then fine iterations)")
+        axes[0][c].set_title(f"sensor: {sensor}", fontsize=9)
+    axes[0][0].legend(fontsize=7)
     fig.suptitle(f"{agent}: closed-loop residual after each move")
     return _save(fig, out / "residuals.png")

@@ -377,3 +377,30 @@ def test_your_own_agent_runs_through_eval_by_module_and_class(tmp_path):
     ]:
         r = run_cli("cfvs_maniskill.eval", "--agents", spec, "--out", str(tmp_path / "bad"))
         assert r.returncode == 2 and says in r.stderr and "Traceback" not in r.stderr, spec
+
+
+def test_an_installed_package_names_its_agent_through_the_entry_point_group(tmp_path):
+    """A package that declares `[project.entry-points."cfvs_maniskill.agents"]` makes its
+    agent a plain `--agents` name (here a dist-info as pip would write it)."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    dist = tmp_path / "site" / "top_face_plugin-0.1.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: top-face-plugin\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(
+        "[cfvs_maniskill.agents]\ntop_face = examples.top_face_agent:TopFaceAgent\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(tmp_path / "site")}
+    args = ["--tasks", "PegInsert3DoF", "--objects", "cuboid_test_1", "--init-errors", "small"]
+    r = subprocess.run(
+        [sys.executable, "-m", "cfvs_maniskill.eval", "--agents", "top_face", *args,
+         "--episodes-per-object", "1", "--workers", "1", "--out", str(tmp_path / "out")],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    (row,) = [json.loads(x) for x in (tmp_path / "out" / "episodes.jsonl").read_text().splitlines()]
+    assert row["agent"] == "top_face" and row["steps"] > 0

@@ -109,12 +109,40 @@ def _user_agent(spec: str) -> type[Agent]:
     return cls
 
 
+ENTRY_POINT_GROUP = "cfvs_maniskill.agents"
+"""Installed packages can name their agents here (pyproject.toml:
+`[project.entry-points."cfvs_maniskill.agents"] mine = "my_pkg.my_module:MyAgent"`), then
+`--agent mine` works like a built-in name."""
+
+
+def installed_agents() -> dict[str, str]:
+    """Agent names that installed packages declare in ENTRY_POINT_GROUP -> their
+    `package.module:Class`."""
+    from importlib.metadata import entry_points
+
+    return {ep.name: ep.value for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def _user_factory(name: str, spec: str) -> Callable[..., Agent]:
+    cls = _user_agent(spec)
+
+    def make(task: TaskSpec) -> Agent:
+        agent = cls(task)
+        agent.name = name  # records and reports use the name it was asked by
+        return agent
+
+    return make
+
+
 def resolve_agent(name: str) -> Callable[..., Agent]:
-    """The factory for an agent name: a registered one, `cfvs@DIR`, or your own class as
-    `package.module:Class` (built with the task's TaskSpec); KeyError with a message naming
-    what is wrong."""
+    """The factory for an agent name: a registered one, one an installed package declares
+    (ENTRY_POINT_GROUP), `cfvs@DIR`, or your own class as `package.module:Class` (built with
+    the task's TaskSpec); KeyError with a message naming what is wrong."""
     if name in AGENTS:
         return AGENTS[name]
+    installed = installed_agents()
+    if name in installed:
+        return _user_factory(name, installed[name])
     if name.startswith(WEIGHTS_PREFIX):
         from pathlib import Path
 
@@ -123,17 +151,11 @@ def resolve_agent(name: str) -> Callable[..., Agent]:
             raise KeyError(f"agent '{name}': no weights folder {folder}")
         return _cfvs(name, weights=str(folder.resolve()))
     if ":" in name:
-        cls = _user_agent(name)
-
-        def make(task: TaskSpec) -> Agent:
-            agent = cls(task)
-            agent.name = name  # records and reports use the name it was asked by
-            return agent
-
-        return make
+        return _user_factory(name, name)
     raise KeyError(
-        f"unknown agent '{name}'; valid: {', '.join(AGENTS)}, {WEIGHTS_PREFIX}DIR (CFVS with "
-        "the weights in DIR) or package.module:Class (your own Agent subclass)"
+        f"unknown agent '{name}'; valid: {', '.join([*AGENTS, *installed])}, "
+        f"{WEIGHTS_PREFIX}DIR (CFVS with the weights in DIR) or package.module:Class (your "
+        "own Agent subclass)"
     )
 
 
@@ -141,6 +163,9 @@ def agent_obs_mode(name: str) -> str:
     """The ManiSkill obs mode the agent `name` needs."""
     if name in AGENT_OBS_MODES:
         return AGENT_OBS_MODES[name]
+    installed = installed_agents()
+    if name in installed:
+        return _user_agent(installed[name]).obs_mode
     if ":" in name and not name.startswith(WEIGHTS_PREFIX):
         return _user_agent(name).obs_mode
     return "pointcloud"

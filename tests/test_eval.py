@@ -226,7 +226,7 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
     with open(results / "eval" / "episodes.jsonl", "a") as f:
         f.write(json.dumps(odd) + "\n")
     out = tmp_path / "report"
-    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out))
+    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--video-variants")
     assert r.returncode == 0, r.stderr[-2000:]
     text = (out / "README.md").read_text()
     shown = text.split("## Videos")[1]
@@ -244,7 +244,7 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
         assert replayed.startswith("success" if success else "failure")
     # a second report keeps the rendered files instead of replaying them again
     before = {p: p.stat().st_mtime_ns for p in (out / "videos").iterdir()}
-    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out))
+    r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--video-variants")
     assert r.returncode == 0 and before == {
         p: p.stat().st_mtime_ns for p in (out / "videos").iterdir()
     }

@@ -22,6 +22,10 @@ class ReportArgs:
     videos: bool = True
     """Render the first success and first failure per agent and task into OUT/videos
     (replayed from their records; files already there are kept)."""
+    video_variants: bool = False
+    """Also film the variants (ablations, other weights, no-search runs: labels other than
+    an agent's own name); by default each agent's own records only (a video costs about
+    10-30 s of rendering on 2 CPU cores: docs/videos.md)."""
     assets: tuple[Path, ...] = ()
     """Extra hole-object folders or files the results used (for the video replays)."""
     readme: Path | None = None
@@ -62,7 +66,8 @@ def main(args: ReportArgs) -> int:
     if residual_png is not None:
         pngs.append(residual_png)
     if args.videos:
-        shown = videos.render(videos.pick(records), args.out / "videos", args.assets)
+        picks = videos.pick(records, variants=args.video_variants)
+        shown = videos.render(picks, args.out / "videos", args.assets)
         video_md = videos.markdown(shown, args.out)
     else:
         video_md = "Not rendered (`--no-videos`)."

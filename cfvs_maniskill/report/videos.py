@@ -23,14 +23,20 @@ class Video:
         return "success" if self.record["success"] else "failure"
 
 
-def pick(records: list[dict]) -> list[dict]:
-    """First success and first failure per (task, label, sensor) in file order. Variants named
-    only by their folder (e.g. results/cfvs_plain from the run command) are skipped: their
+def pick(records: list[dict], variants: bool = False) -> list[dict]:
+    """First success and first failure per (task, label, sensor) in file order; with
+    `variants` False only of labels that are an agent family's own name (cfvs, 3drhd, ...,
+    your own agents), not its ablations or no-search runs. Variants named only by their
+    folder (e.g. results/cfvs_plain from the run command) are always skipped: their
     executor settings are not in the record, so a replay could not match."""
+    from cfvs_maniskill.report.style import family
+
     chosen: dict[tuple, dict] = {}
     # Runner records first: they carry the exact job (object, error, seed) of the episode.
     for r in sorted(records, key=lambda r: "key" not in r):
         if r["label"] != r["agent"] and "search_radius_m" not in r:
+            continue
+        if not variants and r["label"] != family(r["label"]):
             continue
         sensor = r.get("sensor", "ideal")
         chosen.setdefault((r["task"], r["label"], sensor, bool(r["success"])), r)

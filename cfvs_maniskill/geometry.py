@@ -53,6 +53,16 @@ def random_cone(rng: np.random.Generator, axis: np.ndarray, half_angle: float) -
 
 def interpolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     """Straight line in position, slerp in rotation; s in [0, 1]."""
-    rots = Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]]))
-    R = Slerp([0.0, 1.0], rots)([s]).as_matrix()[0]
-    return make(R, (1 - s) * T0[:3, 3] + s * T1[:3, 3])
+    return interpolator(T0, T1)(s)
+
+
+def interpolator(T0: np.ndarray, T1: np.ndarray):
+    """`interpolate(T0, T1, s)` as a function of s, with the slerp built once (a move
+    interpolates every control step of its path)."""
+    slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]])))
+    p0, p1 = T0[:3, 3], T1[:3, 3]
+
+    def at(s: float) -> np.ndarray:
+        return make(slerp([s]).as_matrix()[0], (1 - s) * p0 + s * p1)
+
+    return at

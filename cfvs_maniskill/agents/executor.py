@@ -155,9 +155,10 @@ class Executor:
         if not ok:
             return MoveResult(False, "target pose unreachable (no IK solution)")
         path = []
+        line = G.interpolator(start, target)
         for i in range(1, n + 1):
             q_prev = q
-            q, ok = self.env.ik(G.interpolate(start, target, i / n), q)
+            q, ok = self.env.ik(line(i / n), q)
             if not ok:
                 return MoveResult(False, f"path unreachable at {i}/{n} of the way (no IK solution)")
             if np.abs(q - q_prev).max() > self.cfg.max_joint_step:

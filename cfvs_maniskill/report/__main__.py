@@ -23,8 +23,8 @@ class ReportArgs:
     """Render the first success and first failure per agent and task into OUT/videos
     (replayed from their records; files already there are kept)."""
     video_variants: bool = False
-    """Also film the variants (ablations, other weights, no-search runs: labels other than
-    an agent's own name); by default each agent's own records only (a video costs about
+    """Also film the variants (ablations, other weights, no-search runs, other sensor
+    profiles); by default each agent's own records under the ideal sensor only (a video costs about
     10-30 s of rendering on 2 CPU cores: docs/videos.md)."""
     assets: tuple[Path, ...] = ()
     """Extra hole-object folders or files the results used (for the video replays)."""

@@ -26,7 +26,8 @@ class Video:
 def pick(records: list[dict], variants: bool = False) -> list[dict]:
     """First success and first failure per (task, label, sensor) in file order; with
     `variants` False only of labels that are an agent family's own name (cfvs, 3drhd, ...,
-    your own agents), not its ablations or no-search runs. Variants named only by their
+    your own agents) under the ideal sensor, not its ablations, no-search runs or other
+    sensor profiles. Variants named only by their
     folder (e.g. results/cfvs_plain from the run command) are always skipped: their
     executor settings are not in the record, so a replay could not match."""
     from cfvs_maniskill.report.style import family
@@ -36,7 +37,9 @@ def pick(records: list[dict], variants: bool = False) -> list[dict]:
     for r in sorted(records, key=lambda r: "key" not in r):
         if r["label"] != r["agent"] and "search_radius_m" not in r:
             continue
-        if not variants and r["label"] != family(r["label"]):
+        if not variants and (
+            r["label"] != family(r["label"]) or r.get("sensor", "ideal") != "ideal"
+        ):
             continue
         sensor = r.get("sensor", "ideal")
         chosen.setdefault((r["task"], r["label"], sensor, bool(r["success"])), r)

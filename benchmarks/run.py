@@ -31,7 +31,7 @@ class BenchArgs:
 
 def main(args: BenchArgs) -> int:
     import cfvs_maniskill  # noqa: F401  (render device, tasks)
-    from benchmarks import cfvs_speed, env_step, eval_scaling, sensing, servo_time, startup
+    from benchmarks import cfvs_speed, env_step, eval_scaling, sensing, servo_time, startup, video
 
     t0 = time.perf_counter()
     sections: list[tuple[str, str]] = []
@@ -49,6 +49,7 @@ def main(args: BenchArgs) -> int:
     add("Realistic sensor model against the ideal one", sensing.overhead())
     add("CFVS episode and networks", cfvs_speed.measure(cfvs_speed.Args(episodes=args.episodes)))
     add("Servo time", servo_time.measure(args.servo_episodes))
+    add("Episode videos", video.measure())
     add(
         "Evaluation throughput and memory",
         eval_scaling.measure(args.eval_per_object, ray_nodes=2 if args.ray else 0),

@@ -43,7 +43,7 @@ class RunArgs:
     video: Path | None = None
     """Write one mp4 per episode into this directory: a lit close view of the hole, an
     overview and the wrist camera with the agent's estimated hole frame, captioned with the
-    phase, the contact force and the outcome (about 20-40 s of rendering per episode on a
+    phase, the contact force and the outcome (about 10 s of rendering per episode on a
     2-core CPU; docs/videos.md)."""
     search_radius: float = DEFAULT_SEARCH_RADIUS
     """Compliant spiral search when the peg stalls on the rim, up to this radius, metres

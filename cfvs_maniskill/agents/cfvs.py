@@ -25,7 +25,7 @@ import yaml
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
-from cfvs_maniskill.constants import AGENTS_DIR, PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import AGENTS_DIR, PRE_INSERT_HEIGHT, hole_half_extent
 from cfvs_maniskill.nets.checkpoint import load_weights
 from cfvs_maniskill.nets.oakn import weighted_keypoints
 from cfvs_maniskill.perception import labels as L
@@ -36,6 +36,7 @@ from cfvs_maniskill.perception.clouds import (
     sample_fixed,
     tool_to_world,
 )
+from cfvs_maniskill.perception.rim import align_axis, rim_normal
 from cfvs_maniskill.task_dof import constrain
 
 WEIGHTS_DIR = AGENTS_DIR / "cfvs"
@@ -58,6 +59,10 @@ class CFVSConfig:
     """e_r: ... and the predicted |dr| below this, degrees."""
     fine_votes: int = 3
     """OPN predictions (on independent random point subsets) averaged per fine step."""
+    rim_plane: bool = True
+    """6-DoF: take the hole's axis from the face around the opening (perception/rim.py)
+    instead of OPN's tilt; OPN still gives where the hole is. False: the paper's fine
+    stage (the `cfvs_no_rim` ablation)."""
     weights_dir: Path = WEIGHTS_DIR
 
 
@@ -129,7 +134,9 @@ class CFVSAgent(Agent):
     @torch.no_grad()
     def predict_offset(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
         """OPN: (dt, dr) in the tool frame to the pre-insertion pose, or None."""
-        pts = fine_crop(object_points(xyzw, tcp, self.peg))
+        return self._predict_offset(fine_crop(object_points(xyzw, tcp, self.peg)))
+
+    def _predict_offset(self, pts: np.ndarray) -> np.ndarray | None:
         if len(pts) < MIN_OBJECT_POINTS:
             return None
         n = int(self.opn_meta["points"])
@@ -143,6 +150,20 @@ class CFVSAgent(Agent):
         k, _ = weighted_keypoints(x, offsets, torch.sigmoid(logits))
         acts = [L.fine_action_from_keypoints(ki.numpy()) for ki in k]
         return np.mean(acts, axis=0).astype(np.float64)
+
+    def axis_from_rim(self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+        """OPN's offset `a` with the hole's axis replaced by the normal of the face around
+        the opening it points at (unchanged when the ring gives no face)."""
+        T = L.apply_action(tcp, a)
+        H = L.hole_frame_from_pre_insertion(T)
+        reach = hole_half_extent(self.peg, self.task.clearance)
+        if self.peg == "square":
+            reach *= np.sqrt(2)  # the opening's corner
+        n = rim_normal(tool_to_world(pts, tcp), H[:3, 3], H[:3, 2], reach, self.rng)
+        if n is None:
+            return a
+        pose = insertion_pose(self.peg, align_axis(H, n), -PRE_INSERT_HEIGHT, T)
+        return L.fine_action(tcp, pose)
 
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return constrain(self.task, T, ref)
@@ -160,9 +181,13 @@ class CFVSAgent(Agent):
             pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, tcp)
             return Action.move(self.constrain(pose, tcp))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
-            a = self.predict_offset(xyzw, tcp)
+            pts = object_points(xyzw, tcp, self.peg)  # tool frame
+            with torch.no_grad():
+                a = self._predict_offset(fine_crop(pts))
             if a is None:
                 return Action.give_up("OPN: nothing seen around the peg")
+            if self.task.dof == 6 and self.cfg.rim_plane:
+                a = self.axis_from_rim(a, pts, tcp)
             if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
                 a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
             small = (

@@ -65,10 +65,12 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs_no_c2f": _cfvs("cfvs_no_c2f", coarse_to_fine=False),
     "cfvs_no_map": _cfvs("cfvs_no_map", confidence_map=False),
     "cfvs_no_aug": _cfvs("cfvs_no_aug", augmentation=False),
-    "cfvs_aug": _cfvs("cfvs_aug", augmentation=True),
+    "cfvs_aug": _cfvs("cfvs_aug", augmentation=True, rim_plane=False),
+    # The fine stage as the paper has it: OPN's own tilt, not the face around the opening.
+    "cfvs_no_rim": _cfvs("cfvs_no_rim", rim_plane=False),
     # The fine stage trained on the ideal sensor's clouds only (the weights before the
     # sensor-mixed OPN): what training on the sensors' noise buys.
-    "cfvs_ideal_data": _cfvs("cfvs_ideal_data", weights="ideal_data"),
+    "cfvs_ideal_data": _cfvs("cfvs_ideal_data", weights="ideal_data", rim_plane=False),
     # The paper's baselines (Table II).
     "icp": _icp("workspace"),
     "icp_kpts": _icp("oakn"),

@@ -1,0 +1,62 @@
+"""The hole's axis from the face around the opening (perception/rim.py): the face's normal
+through noise and beside a wall, and no answer where the ring holds no face."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from cfvs_maniskill.perception.rim import MAX_TURN_DEG, align_axis, rim_normal
+
+HALF = 0.025 * np.sqrt(2)  # a 50 mm square hole's corner
+
+
+def _face(rng, normal, n=1500, noise=0.0):
+    """Points of a plane through the origin with `normal`, 0-90 mm from the origin, minus
+    the opening."""
+    R = Rotation.align_vectors([normal], [[0.0, 0.0, 1.0]])[0].as_matrix()
+    xy = rng.uniform(-0.09, 0.09, size=(n, 2))
+    xy = xy[np.max(np.abs(xy), axis=1) > 0.026]
+    p = (
+        np.column_stack([xy, rng.normal(0, noise, len(xy))])
+        if noise
+        else np.column_stack([xy, np.zeros(len(xy))])
+    )
+    return p @ R.T
+
+
+def _angle(a, b):
+    return np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))
+
+
+def test_the_normal_of_a_noisy_face_beside_a_wall_despite_a_wrong_guess():
+    rng = np.random.default_rng(0)
+    normal = np.array([0.2, -0.1, 1.0]) / np.linalg.norm([0.2, -0.1, 1.0])
+    face = _face(rng, normal, noise=0.002)  # 2 mm depth noise
+    # A wall 45 mm from the centre, rising 40 mm (a stepped block's step), inside the ring.
+    wall = np.column_stack(
+        [np.full(300, 0.045), rng.uniform(-0.06, 0.06, 300), rng.uniform(0, 0.04, 300)]
+    )
+    guess = np.array([0.0, 0.0, 1.0])  # 12.6 deg off, as a fine network beside a step
+    n = rim_normal(np.vstack([face, wall]), np.zeros(3), guess, HALF, rng)
+    assert n is not None and _angle(n, normal) < 0.5
+    assert n @ guess > 0  # on the guess's side
+
+
+def test_no_answer_without_enough_face_or_for_a_surface_far_from_the_guess():
+    rng = np.random.default_rng(1)
+    assert rim_normal(_face(rng, np.array([0, 0, 1.0]), n=40), np.zeros(3),
+                      np.array([0, 0, 1.0]), HALF, rng) is None  # fmt: skip
+    tilted = np.array([np.sin(np.radians(35)), 0, np.cos(np.radians(35))])
+    assert MAX_TURN_DEG < 35
+    assert rim_normal(_face(rng, tilted), np.zeros(3), np.array([0, 0, 1.0]), HALF, rng) is None
+
+
+def test_align_axis_turns_z_onto_the_normal_and_keeps_the_origin():
+    H = np.eye(4)
+    H[:3, 3] = [0.1, 0.2, 0.3]
+    normal = np.array([0.1, 0.2, 1.0]) / np.linalg.norm([0.1, 0.2, 1.0])
+    out = align_axis(H, normal)
+    assert np.allclose(out[:3, 2], normal) and np.allclose(out[:3, 3], H[:3, 3])
+    assert np.allclose(out[:3, :3] @ out[:3, :3].T, np.eye(3))
+    assert _angle(out[:3, 0], H[:3, 0]) < _angle(normal, H[:3, 2]) + 1e-6  # smallest turn

@@ -151,9 +151,11 @@ class CFVSAgent(Agent):
         acts = [L.fine_action_from_keypoints(ki.numpy()) for ki in k]
         return np.mean(acts, axis=0).astype(np.float64)
 
-    def axis_from_rim(self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+    def axis_from_rim(
+        self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray
+    ) -> tuple[np.ndarray, bool]:
         """OPN's offset `a` with the hole's axis replaced by the normal of the face around
-        the opening it points at (unchanged when the ring gives no face)."""
+        the opening it points at, and True; (a, False) when the ring gives no face."""
         T = L.apply_action(tcp, a)
         H = L.hole_frame_from_pre_insertion(T)
         reach = hole_half_extent(self.peg, self.task.clearance)
@@ -161,9 +163,9 @@ class CFVSAgent(Agent):
             reach *= np.sqrt(2)  # the opening's corner
         n = rim_normal(tool_to_world(pts, tcp), H[:3, 3], H[:3, 2], reach, self.rng)
         if n is None:
-            return a
+            return a, False
         pose = insertion_pose(self.peg, align_axis(H, n), -PRE_INSERT_HEIGHT, T)
-        return L.fine_action(tcp, pose)
+        return L.fine_action(tcp, pose), True
 
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return constrain(self.task, T, ref)
@@ -186,8 +188,10 @@ class CFVSAgent(Agent):
                 a = self._predict_offset(fine_crop(pts))
             if a is None:
                 return Action.give_up("OPN: nothing seen around the peg")
+            source = "OPN offset"
             if self.task.dof == 6 and self.cfg.rim_plane:
-                a = self.axis_from_rim(a, pts, tcp)
+                a, on_rim = self.axis_from_rim(a, pts, tcp)
+                source = "OPN position, axis from the rim" if on_rim else source
             if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
                 a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
             small = (
@@ -198,7 +202,7 @@ class CFVSAgent(Agent):
             self.estimate = L.hole_frame_from_pre_insertion(target)
             if not small:
                 self.fine_steps += 1
-                self.phase = f"fine iteration {self.fine_steps}: OPN offset"
+                self.phase = f"fine iteration {self.fine_steps}: {source}"
                 return Action.move(target)
         self.phase = "insertion"
         return Action.insert()

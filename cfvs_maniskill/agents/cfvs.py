@@ -4,12 +4,15 @@
    turns them into the hole frame; the peg moves to the pre-insertion pose above it.
 2. Fine (closed loop, Algorithm 2): OPN reads the cloud cropped around the end-effector and
    returns the offset (dt, dr) to the pre-insertion pose; the peg moves by it; repeat until
-   the offset is below (e_t, e_r) or `max_fine_iterations` is reached.
+   the offset is below (e_t, e_r) or `max_fine_iterations` is reached. In 6-DoF (beyond
+   the paper, `rim_plane`) the offset's tilt is replaced by the normal of the face around
+   the opening OPN points at (perception/rim.py): OPN gives where the hole is, the face
+   gives its axis.
 3. Insert along the tool axis (shared executor, force-bounded).
 
 Ablations of the paper's Table IV are switches: `coarse_to_fine=False` inserts right after
 the coarse move, `confidence_map=False` averages all candidate keypoints uniformly,
-`augmentation=True / False` loads weights trained with / without the paper's augmentation
+`rim_plane=False` is the paper's fine stage, `augmentation=True / False` loads weights trained with / without the paper's augmentation
 (the shipped file if it was trained that way, by its .json; else `*_aug.pt` / `*_noaug.pt`).
 """
 
@@ -132,11 +135,9 @@ class CFVSAgent(Agent):
         return L.hole_frame_from_keypoints(k_world.astype(np.float64))
 
     @torch.no_grad()
-    def predict_offset(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
-        """OPN: (dt, dr) in the tool frame to the pre-insertion pose, or None."""
-        return self._predict_offset(fine_crop(object_points(xyzw, tcp, self.peg)))
-
-    def _predict_offset(self, pts: np.ndarray) -> np.ndarray | None:
+    def predict_offset(self, pts: np.ndarray) -> np.ndarray | None:
+        """OPN on the fine crop `pts` (tool frame): (dt, dr) in the tool frame to the
+        pre-insertion pose, or None."""
         if len(pts) < MIN_OBJECT_POINTS:
             return None
         n = int(self.opn_meta["points"])
@@ -184,8 +185,7 @@ class CFVSAgent(Agent):
             return Action.move(self.constrain(pose, tcp))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
             pts = object_points(xyzw, tcp, self.peg)  # tool frame
-            with torch.no_grad():
-                a = self._predict_offset(fine_crop(pts))
+            a = self.predict_offset(fine_crop(pts))
             if a is None:
                 return Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"

@@ -81,6 +81,9 @@ def _bare_scene(u):
     hole = b.build_kinematic()
     hole.set_pose(u.hole_objects[u.object_index].pose.sp)
     tool = next(link for link in robot.get_links() if link.name == TOOL_LINK)
+    # The wrist camera's shader: SAPIEN's default is global and was last set by whichever
+    # camera ManiSkill built before (the env's lit render cameras use "default").
+    sapien.render.set_camera_shader_dir("minimal")
     cam = scene.add_mounted_camera(
         "floor_camera", tool.entity, camera_pose_in_tool(),
         u.task.camera_width, u.task.camera_height, CAMERA_FOV, 0.01, 2.0,

@@ -69,3 +69,12 @@ def test_projection_puts_a_point_on_the_optical_axis_at_the_principal_point():
     )
     assert np.allclose(uv[0], [64, 48]) and np.allclose(uv[1], [74, 48])
     assert np.isnan(uv[2]).all()  # behind the camera: not drawn
+
+
+def test_an_env_without_the_render_cameras_gets_a_clear_error():
+    from types import SimpleNamespace
+
+    scene = SimpleNamespace(human_render_cameras={"render_camera": object()})
+    env = SimpleNamespace(unwrapped=SimpleNamespace(scene=scene))
+    with pytest.raises(ValueError, match="closeup.*overview.*render_camera"):
+        Film(env, "cfvs")

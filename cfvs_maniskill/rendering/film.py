@@ -71,10 +71,18 @@ def _params(cam) -> dict:
 
 
 class Film:
-    """Collects frames of one episode at a time; `finish` writes them as an mp4."""
+    """Collects the frames of one episode at a time (`start` ... `finish`, driven by
+    `episode.run_episode`); `write` saves them as an mp4."""
 
     def __init__(self, env, label: str, cfg: FilmConfig | None = None):
         self.env = env.unwrapped
+        missing = {CLOSEUP_CAMERA, OVERVIEW_CAMERA} - set(self.env.scene.human_render_cameras)
+        if missing:
+            raise ValueError(
+                f"videos need the env's render cameras {sorted(missing)}; this env has "
+                f"{sorted(self.env.scene.human_render_cameras)} (human_render_camera_configs "
+                "replaced them?)"
+            )
         self.label = label
         self.cfg = cfg or FilmConfig()
         self.frames: list[np.ndarray] = []

@@ -94,9 +94,9 @@ def run_episode(
     obs, _ = env.reset(seed=seed, options=options or {})
     agent.reset(seed)
     executor.reset()
+    executor.on_step = None if film is None else film.on_step
     if film is not None:
         film.start()
-        executor.on_step = film.on_step
     reason = ""
     inserted = False
     residuals: list[list[float]] = []

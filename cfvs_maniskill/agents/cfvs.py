@@ -12,8 +12,9 @@
 
 Ablations of the paper's Table IV are switches: `coarse_to_fine=False` inserts right after
 the coarse move, `confidence_map=False` averages all candidate keypoints uniformly,
-`rim_plane=False` is the paper's fine stage, `augmentation=True / False` loads weights trained with / without the paper's augmentation
+`augmentation=True / False` loads weights trained with / without the paper's augmentation
 (the shipped file if it was trained that way, by its .json; else `*_aug.pt` / `*_noaug.pt`).
+`rim_plane=False` is the paper's own fine stage (OPN's tilt).
 """
 
 from __future__ import annotations

@@ -187,7 +187,7 @@ class PegInsertEnv(BaseEnv):
     @property
     def _default_human_render_camera_configs(self):
         # For people (videos, `render()`), never for agents: a close view that follows the
-        # hole (aimed at every reset, `_aim_closeup`) and an overview of the arm, with
+        # hole (aimed at every reset, `_aim_cameras`) and an overview of the arm, with
         # ManiSkill's lit "default" shader (the wrist camera keeps the fast "minimal" one).
         return [
             CameraConfig(
@@ -279,9 +279,9 @@ class PegInsertEnv(BaseEnv):
         return flange_pose(self.tcp_matrix())
 
     def contact_wrench(self, flange: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Ground truth (tests and videos, never agents): the summed wrench of all the peg's contacts in the last
-        physics step, world frame: force (N) and its moment (N m) about the flange (its pose
-        `flange`, default the current one)."""
+        """Ground truth (tests and videos, never agents): the summed wrench of all the peg's
+        contacts in the last physics step, world frame: force (N) and its moment (N m) about
+        the flange (its pose `flange`, default the current one)."""
         origin = (self.flange_matrix() if flange is None else flange)[:3, 3]
         force, moment = np.zeros(3), np.zeros(3)
         peg = self.agent.robot.links_map["peg"]._objs[0].entity

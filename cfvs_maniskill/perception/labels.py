@@ -137,10 +137,9 @@ def fine_keypoints(action: np.ndarray) -> np.ndarray:
     """A fine sample's keypoints (tool frame) from its action: the target pre-insertion
     tool frame is PRE_INSERT_HEIGHT above the hole's centre, its z into the hole, its x the
     hole's canonical x."""
-    T = apply_action(np.eye(4), np.asarray(action, np.float64))
-    c = T[:3, 3] + PRE_INSERT_HEIGHT * T[:3, 2]
-    s = KEYPOINT_SPACING
-    return np.stack([c, c + s * T[:3, 0], c - s * T[:3, 2]])
+    H = hole_frame_from_pre_insertion(apply_action(np.eye(4), np.asarray(action, np.float64)))
+    c, s = H[:3, 3], KEYPOINT_SPACING
+    return np.stack([c, c + s * H[:3, 0], c + s * H[:3, 2]])
 
 
 def fine_action_from_keypoints(k: np.ndarray) -> np.ndarray:

@@ -174,7 +174,7 @@ class Film:
                 stroke_width=2,
                 stroke_fill=(0, 0, 0),
             )
-        force = float(np.linalg.norm(u.contact_wrench(u.flange_matrix())[0]))
+        force = float(np.linalg.norm(u.contact_wrench()[0]))
         line1 = f"{self.label}   {u.task.name}   t = {t:5.2f} s   contact force {force:5.1f} N"
         colour = (255, 255, 255)
         if is_outcome:

@@ -46,8 +46,7 @@ def success_per_agent(records: list[dict], out: Path) -> Path:
     tasks = sorted({r["task"] for r in records})
     labels = sorted({line_label(r) for r in records})
     look = style.looks(labels)
-    order = [lb for _, group in style.panels(labels) for lb in group]
-    order = list(dict.fromkeys(order))  # the family's own agent leads its variants' panels
+    order = style.order(labels)
     per_task = {
         t: [lb for lb in order if any(r["task"] == t and line_label(r) == lb for r in records)]
         for t in tasks
@@ -116,7 +115,7 @@ def servo_times(records: list[dict], out: Path) -> Path:
     """Simulated servo time of the successes, a box per label in its family's colour."""
     labels = sorted({r["label"] for r in records})
     look = style.looks(labels)
-    order = list(dict.fromkeys(lb for _, g in style.panels(labels) for lb in g))
+    order = style.order(labels)
     data = [
         [r["servo_time_s"] for r in records if r["label"] == lb and r["success"]] for lb in order
     ]

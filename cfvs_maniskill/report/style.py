@@ -82,3 +82,9 @@ def panels(labels: list[str]) -> list[tuple[str, list[str]]]:
         for i in range(0, len(body), step):
             out.append((f"{f} variants", lead + body[i : i + step]))
     return out
+
+
+def order(labels: list[str]) -> list[str]:
+    """Every label once, in panel order: the families' own agents, then each family's
+    variants (for plots that show all labels in one axis)."""
+    return list(dict.fromkeys(lb for _, group in panels(labels) for lb in group))

@@ -70,7 +70,7 @@ def main(args: RunArgs) -> list:
     from tqdm import tqdm
 
     from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-    from cfvs_maniskill.agents.registry import agent_obs_mode, make_agent, resolve_agent
+    from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent, resolve_agent
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.eval.results import ResultsError, append
     from cfvs_maniskill.objects.library import SelectionError
@@ -90,7 +90,7 @@ def main(args: RunArgs) -> list:
     except ValueError as e:
         _fail(str(e))
     kwargs = dict(
-        obs_mode=agent_obs_mode(args.agent),
+        **agent_env_kwargs(args.agent),
         objects=list(args.objects) or None,
         assets=[str(a) for a in args.assets],
         init_error=args.init_error,

@@ -14,9 +14,10 @@ import torch
 from cfvs_maniskill.agents.base import Agent, Observation
 from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import ALLOWED_OBS, TaskSpec
-from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, AGENTS, PRIVILEGED, make_agent
+from cfvs_maniskill.agents.registry import AGENTS, PRIVILEGED, agent_env_kwargs, make_agent
 from cfvs_maniskill.envs.task_config import TaskConfig
 from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.robots.ur5 import STEREO_UIDS
 
 ENV_ID = "PegInsert6DoF-v1"
 FORBIDDEN_TYPES = (gym.Env, gym.Wrapper, TaskConfig, sapien.Scene, sapien.Entity)
@@ -51,7 +52,7 @@ def _reachable(root, limit: int = 20000):
 
 @pytest.mark.parametrize("name", [a for a in AGENTS if a not in PRIVILEGED])
 def test_agents_cannot_reach_the_env(make_env, name):
-    env = make_env(ENV_ID, obs_mode=AGENT_OBS_MODES.get(name, "pointcloud"))
+    env = make_env(ENV_ID, **agent_env_kwargs(name))
     agent = make_agent(name, env)
     assert not agent.privileged
     leaks = [type(x).__name__ for x in _reachable(agent) if isinstance(x, FORBIDDEN_TYPES)]
@@ -73,6 +74,7 @@ class Spy(Agent):
 
     def __init__(self, inner: Agent):
         self.inner, self.name, self.obs_mode = inner, inner.name, inner.obs_mode
+        self.env_options = inner.env_options
         self.max_decisions = inner.max_decisions
         self.resets: list = []
         self.seen: list[Observation] = []
@@ -93,19 +95,22 @@ def _keys(d: dict, prefix: str = "") -> set[str]:
     return out
 
 
-@pytest.mark.parametrize("name", ["cfvs", "kovis"])
-def test_agents_are_handed_only_what_a_robot_has(make_env, name):
+@pytest.mark.parametrize(("name", "env_id"), [("cfvs", ENV_ID), ("kovis", "PegInsert3DoF-v1")])
+def test_agents_are_handed_only_what_a_robot_has(make_env, name, env_id):
     """Through a whole episode: reset gets the episode seed (an int) and nothing else; each
     observation holds only the wrist camera's cloud or images (no segmentation, no true
-    poses, no sensor extrinsics), the tcp pose, joint angles and the wrist wrench."""
-    env = make_env(ENV_ID, obs_mode=AGENT_OBS_MODES.get(name, "pointcloud"), sensor="realistic")
+    poses, no sensor extrinsics, no noise-free depth of the stereo imagers), the tcp pose,
+    joint angles and the wrist wrench."""
+    env = make_env(env_id, **agent_env_kwargs(name), sensor="realistic")
     spy = Spy(make_agent(name, env))
     run_episode(env, spy, Executor(env), seed=21)
     assert spy.resets == [21] and type(spy.resets[0]) is int
     assert spy.seen
-    allowed = {f"pointcloud/{k}" for k in ALLOWED_OBS["pointcloud"]} | {
-        f"sensor_data/wrist_camera/{k}" for k in ALLOWED_OBS["sensor_data"]
-    }
+    allowed = (
+        {f"pointcloud/{k}" for k in ALLOWED_OBS["pointcloud"]}
+        | {f"sensor_data/wrist_camera/{k}" for k in ALLOWED_OBS["sensor_data"]}
+        | {f"sensor_data/{cam}/rgb" for cam in STEREO_UIDS}
+    )
     for o in spy.seen:
         assert {f.name for f in dataclasses.fields(o)} == {"obs", "tcp_pose", "qpos", "wrench"}
         keys = _keys(o.obs)

@@ -16,15 +16,14 @@ from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.hole_detect import HoleDetectConfig, detect_hole
 from cfvs_maniskill.agents.icp import ICPAgent, ICPConfig
 from cfvs_maniskill.agents.interface import TaskSpec
-from cfvs_maniskill.agents.registry import AGENT_OBS_MODES, make_agent
+from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent
 from cfvs_maniskill.constants import hole_half_extent
 from cfvs_maniskill.envs.peg_insert import PARK
 from cfvs_maniskill.episode import run_episode
 
 
 def _episodes(make_env, agent_name: str, task: str, objects, seeds) -> list:
-    obs_mode = AGENT_OBS_MODES.get(agent_name, "pointcloud")
-    env = make_env(f"{task}-v1", obs_mode=obs_mode, objects=tuple(objects))
+    env = make_env(f"{task}-v1", **agent_env_kwargs(agent_name), objects=tuple(objects))
     agent = make_agent(agent_name, env)
     ex = Executor(env)
     return [run_episode(env, agent, ex, s) for s in seeds]
@@ -114,9 +113,8 @@ class _NothingInView(gym.Wrapper):
 @pytest.mark.slow
 @pytest.mark.parametrize("agent", ["icp", "icp_kpts", "3drhd", "kovis"])
 def test_baselines_fail_with_a_reason_when_nothing_is_in_view(make_env, agent):
-    env = _NothingInView(
-        make_env("PegInsert6DoF-v1", obs_mode=AGENT_OBS_MODES.get(agent, "pointcloud"))
-    )
+    task = "PegInsert3DoF-v1" if agent == "kovis" else "PegInsert6DoF-v1"
+    env = _NothingInView(make_env(task, **agent_env_kwargs(agent)))
     pol = make_agent(agent, env)
     r = run_episode(env, pol, Executor(env), 5)
     assert not r.success

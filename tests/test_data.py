@@ -211,15 +211,54 @@ def kovis_file(tmp_path_factory):
     return out
 
 
-def test_kovis_samples_are_upright_images_with_the_motion_to_the_goal(kovis_file):
+def test_kovis_rollouts_are_stereo_pairs_with_the_motion_to_the_goal(kovis_file):
+    """A KOVIS sample is a rollout from the goal: 5 frames of the wrist camera's two lit
+    imagers (different views of one scene), their depth and segmentation, and the tool
+    motion that returns each frame's pose to the goal (zero at the first frame)."""
     attrs, d = load(kovis_file)
     assert attrs["kind"] == "kovis"
-    assert d["gray"].shape == (12, 64, 64) and d["gray"].dtype == np.uint8
-    assert d["depth"].shape == (12, 64, 64)
-    assert d["gray"].std() > 5  # a real image, not a blank
-    for tcp, goal, a in zip(d["tcp_pose"], d["target_pose"], d["action"], strict=True):
-        assert np.allclose(L.apply_action(tcp, a), goal, atol=1e-4)  # the label reaches the goal
-        assert tcp[2, 2] < -0.999  # 4-DoF: the peg points straight down
+    assert d["images"].shape == (12, 5, 2, 96, 96) and d["images"].dtype == np.uint8
+    assert d["depth"].shape == d["seg"].shape == (12, 5, 2, 48, 48)
+    assert d["images"].std() > 5  # real images, not blanks
+    left, right = d["images"][:, :, 0].astype(float), d["images"][:, :, 1].astype(float)
+    assert 0.5 < np.abs(left - right).mean() < 40  # two imagers apart, one scene
+    assert set(np.unique(d["seg"])) >= {0, 2}  # background and the hole object
+    assert np.all(d["valid"][:, :3])  # at least 3 frames per rollout, as KOVIS keeps
+    assert np.allclose(d["twist"][:, 0], 0, atol=1e-3)  # the first frame is the goal
+    for r in range(12):
+        for k in np.nonzero(d["valid"][r])[0]:
+            tcp, a = d["tcp_pose"][r, k], d["twist"][r, k]
+            assert np.allclose(L.apply_action(tcp, a), d["target_pose"][r], atol=1e-4)
+            assert tcp[2, 2] < -0.999  # 4-DoF: the peg points straight down
+            assert np.allclose(a[3:5], 0, atol=1e-4)  # 4-DoF: yaw is the only rotation
+
+
+def test_kovis_training_resumes_where_it_stopped(kovis_file, tmp_path):
+    """Stopped by --max-minutes after its first batch and run again, KOVIS training ends in
+    the same weights as one uninterrupted run (same batches, same augmentation draws)."""
+    from cfvs_maniskill.nets.checkpoint import load_weights
+    from cfvs_maniskill.train_kovis import TrainKOVISArgs
+    from cfvs_maniskill.train_kovis import train as train_kovis
+
+    def args(out, minutes=0.0):
+        return TrainKOVISArgs(
+            data=(kovis_file,), out=out, dof=4, epochs=2, batch=8, growth=(4, 4, 16),
+            val_fraction=0.2, max_minutes=minutes, threads=1,
+        )  # fmt: skip
+
+    whole = tmp_path / "whole.pt"
+    train_kovis(args(whole))
+    split = tmp_path / "split.pt"
+    state = train_kovis(args(split, minutes=1e-6))
+    resume = split.with_name(split.name + ".resume")
+    assert not split.exists() and resume.exists() and state["step"] == 1
+    train_kovis(args(split))
+    assert not resume.exists()
+    a, _ = load_weights(whole, "kovis", "square")
+    b, meta = load_weights(split, "kovis", "square")
+    for (k, x), y in zip(a.state_dict().items(), b.state_dict().values(), strict=True):
+        assert torch.equal(x, y), k
+    assert len(meta["history"]) == 2
 
 
 def test_training_writes_weights_that_load(coarse_file, kovis_file, tmp_path):
@@ -237,7 +276,9 @@ def test_training_writes_weights_that_load(coarse_file, kovis_file, tmp_path):
     assert meta["command"].startswith("python -m cfvs_maniskill.train")
     assert out.with_suffix(".json").is_file()
     out = tmp_path / "square.pt"
-    train_kovis(TrainKOVISArgs(data=(kovis_file,), out=out, dof=4, epochs=1, batch=4))
+    train_kovis(
+        TrainKOVISArgs(data=(kovis_file,), out=out, dof=4, epochs=1, batch=4, growth=(4, 4, 16))
+    )
     net, meta = load_weights(out, "kovis", "square")
     assert net.cfg.motion_dims == 4 and "direction_err_deg_mean" in meta["validation"]
 

@@ -236,6 +236,7 @@ def test_shipped_profiles_load_and_cite_their_numbers():
         ({"wrench": {"force_noise": "lots"}}, "wrench.force_noise"),
         ({"depth": {"edge_dropout": 0.8, "edge_flying": 0.5}}, "depth.edge_flying"),
         ({"camera": {}}, "camera"),
+        ({"imager": {"stereo_baseline": 0}}, "imager.stereo_baseline"),
     ],
 )
 def test_bad_profile_fields_are_named(tmp_path, sections, field):

@@ -51,6 +51,9 @@ class Agent(abc.ABC):
     name: str = "agent"
     obs_mode: str = "pointcloud"
     """The ManiSkill obs mode this agent needs."""
+    env_options: dict = {}  # noqa: RUF012  (read-only: a class-level default)
+    """Other gym.make keywords the agent needs, e.g. {"stereo": True} for the wrist
+    camera's stereo pair of lit grey images."""
     max_decisions: int = 30
     privileged: bool = False
     """True only for the oracle, which is handed the env and reads true poses."""

@@ -45,9 +45,12 @@ class TaskSpec:
 ALLOWED_OBS = {
     "pointcloud": {"xyzw", "rgb"},
     "sensor_data": {"rgb", "depth"},
+    "stereo_imagers": {"rgb"},
 }
-"""The observation keys a robot has: the wrist cloud (xyz, colour) or the wrist images.
-Segmentation, the simulator's `extra` (true poses) and the camera's true extrinsics are not."""
+"""The observation keys a robot has: the wrist cloud (xyz, colour) or the wrist images (the
+stereo imagers' grey views; their depth is the renderer's exact one, which the sensor
+profile's depth model never touched, so it is not handed on). Segmentation, the
+simulator's `extra` (true poses) and the camera's true extrinsics are not."""
 
 
 def robot_view(obs: Any) -> dict:
@@ -60,8 +63,14 @@ def robot_view(obs: Any) -> dict:
             k: v for k, v in obs["pointcloud"].items() if k in ALLOWED_OBS["pointcloud"]
         }
     if "sensor_data" in obs:
+        from cfvs_maniskill.robots.ur5 import STEREO_UIDS
+
         out["sensor_data"] = {
-            cam: {k: v for k, v in data.items() if k in ALLOWED_OBS["sensor_data"]}
+            cam: {
+                k: v
+                for k, v in data.items()
+                if k in ALLOWED_OBS["stereo_imagers" if cam in STEREO_UIDS else "sensor_data"]
+            }
             for cam, data in obs["sensor_data"].items()
         }
     return out

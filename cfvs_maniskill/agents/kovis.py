@@ -1,13 +1,17 @@
-"""The KOVIS baseline (Puang et al. 2020): closed-loop image-based servoing on learned
-keypoints, step by step until the converter says "arrived", then insertion.
+"""The KOVIS baseline (Puang et al. 2020): closed-loop servoing on learned keypoints of the
+wrist camera's stereo pair, step by step until the speed says "arrived", then insertion.
 
-Each decision: the wrist image -> keypoints -> a unit motion direction (tool frame, the
-task's degrees of freedom) and a speed in (0, 1); the peg moves `speed * speed_range`
-along the direction (so a far goal is approached in steps of at most `speed_range`).
-It stops when the speed says the goal is within `stop_distance`, or when that predicted
-distance has stopped shrinking (the servo circles the goal at its precision). In 3 / 4-DoF tasks the
-peg is first turned to point straight down where it is (the servo was trained on upright
-poses there), as every agent keeps the task's degrees of freedom.
+Each decision: both grey images -> keypoints -> the converter's unit motion direction
+(tool frame, the task's degrees of freedom) and speed s in (0, 1), trained as
+1 - exp(-a_dist * distance). KOVIS drives the robot at velocity s * v_max along the
+direction and stops once s has stayed below a threshold for a few frames
+(inference_oja.py: `speed - thresholds[0]`, `cnt_end > thresholds[1]`). Here a decision is
+a move, not a velocity held for a frame: the move's length is the distance the speed
+implies, -ln(1 - s) / a_dist (its own training target inverted), times a gain and at most
+`max_step`. Near the goal this is KOVIS's velocity law at v_max * dt = 1 / a_dist; far
+away it takes longer strides than a 10 Hz velocity loop would between two images. In 3 /
+4-DoF tasks the peg is first turned to point straight down where it is (KOVIS aligns the
+tool perpendicular first too: `move_tcp_perpendicular`).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.nets.checkpoint import load_weights
 from cfvs_maniskill.perception import labels as L
-from cfvs_maniskill.perception.images import wrist_images
+from cfvs_maniskill.perception.images import normalise, stereo_images
 from cfvs_maniskill.task_dof import constrain
 
 WEIGHTS_DIR = AGENTS_DIR / "kovis"
@@ -35,63 +39,77 @@ MOTION_DIMS = {3: [0, 1, 2], 4: [0, 1, 2, 5], 6: [0, 1, 2, 3, 4, 5]}
 class KOVISAgentConfig:
     weights_dir: Path = WEIGHTS_DIR
     """Folder with `<peg>.pt` (round.pt, square.pt)."""
-    stop_distance: float = 0.003
-    """Arrived when the predicted distance (speed * speed_range) is below this, metres."""
-    max_steps: int = 25
-    """Servo steps before inserting anyway."""
-    patience: int = 3
-    """Also arrived when the predicted distance has not improved for this many steps: the
-    servo is circling the goal at the limit of its precision."""
-    gain: float = 0.6
-    """Fraction of the predicted distance moved per step (a visual servo's lambda): a
-    full step overshoots by the speed's error and runs the peg into the object."""
+    stop_speed: float = 0.25
+    """Arrived when the speed stays below this (KOVIS's thresholds[0]); 0.25 means about
+    1.4 mm to go at a_dist 200."""
+    stop_count: int = 2
+    """... for this many decisions in a row (KOVIS's thresholds[1], counted in frames)."""
+    max_step: float = 0.02
+    """Longest move per decision, m (rotation counted at the converter's rot_mul)."""
+    gain: float = 0.8
+    """Fraction of the implied distance moved per decision (a visual servo's lambda)."""
+    max_steps: int = 60
+    """Servo decisions before inserting anyway (KOVIS servoes for a set duration)."""
 
 
 class KOVISAgent(Agent):
     name = "kovis"
     obs_mode = "rgbd"
+    env_options = {"stereo": True}  # noqa: RUF012
 
     def __init__(self, task: TaskSpec, cfg: KOVISAgentConfig | None = None):
         self.task = task
         self.cfg = cfg or KOVISAgentConfig()
         peg = task.peg
         self.net, self.meta = load_weights(self.cfg.weights_dir / f"{peg}.pt", "kovis", peg)
+        if self.net.cfg.motion_dims < task.dof:
+            raise ValueError(
+                f"{self.cfg.weights_dir / f'{peg}.pt'}: field 'config.motion_dims': the net "
+                f"drives {self.net.cfg.motion_dims} DoF, task {task.name} needs {task.dof}"
+            )
         self.max_decisions = self.cfg.max_steps + 2
-        self.steps = 0
-        self.upright = False
-        self.best, self.stalled = np.inf, 0
+        self.reset(0)
 
     def reset(self, seed: int) -> None:
         self.steps = 0
         self.upright = self.task.dof == 6
-        self.best, self.stalled = np.inf, 0
+        self.low = 0
+        self.phase, self.estimate = "", None
 
     @torch.no_grad()
     def motion(self, obs: dict) -> tuple[np.ndarray, float]:
-        """(tool-frame action (dt, dr) of one servo step, predicted distance to the goal)."""
-        gray, _ = wrist_images(obs)
-        _, _, direction, speed_logit = self.net(torch.from_numpy(gray)[None])
+        """(tool-frame action (dt, dr) of one servo decision, the speed s)."""
+        x = normalise(torch.from_numpy(stereo_images(obs, self.net.cfg.image)))[None]
+        out = self.net(x[:, :1], x[:, 1:], decode=False)
         cfg = self.net.cfg
-        speed = float(torch.sigmoid(speed_logit[0]))
-        step = direction[0].numpy().astype(np.float64) * speed * cfg.speed_range * self.cfg.gain
+        s = float(torch.sigmoid(out["speed"][0]))
+        distance = -np.log1p(-min(s, 0.9999)) / cfg.a_dist
+        length = min(self.cfg.gain * distance, self.cfg.max_step)
+        step = out["direction"][0].numpy().astype(np.float64) * length
+        dims = MOTION_DIMS[cfg.motion_dims]
         action = np.zeros(6)
-        action[MOTION_DIMS[cfg.motion_dims]] = step
-        action[3:] /= cfg.rot_scale
-        return action, speed * cfg.speed_range
+        action[dims] = step
+        action[3:] *= cfg.rot_mul  # the direction's rotation is in metres / rot_mul
+        keep = MOTION_DIMS[self.task.dof]  # a 6-D net serving a 4-DoF task keeps its yaw
+        action[[i for i in range(6) if i not in keep]] = 0.0
+        return action, s
 
     def act(self, observation: Observation) -> Action:
         tcp = observation.tcp_pose
         if not self.upright:
             self.upright = True
+            self.phase = "align the tool"
             return Action.move(constrain(self.task, tcp, ref=tcp))
         if self.steps >= self.cfg.max_steps:
+            self.phase = "insert (servo time out)"
             return Action.insert()
-        action, distance = self.motion(observation.obs)
+        action, s = self.motion(observation.obs)
         if not np.all(np.isfinite(action)):
             return Action.give_up("KOVIS: the servo network returned a non-finite motion")
-        self.stalled = 0 if distance < self.best else self.stalled + 1
-        self.best = min(self.best, distance)
-        if distance < self.cfg.stop_distance or self.stalled >= self.cfg.patience:
+        self.low = self.low + 1 if s < self.cfg.stop_speed else 0
+        if self.low >= self.cfg.stop_count:
+            self.phase = f"insert (speed {s:.2f})"
             return Action.insert()
         self.steps += 1
+        self.phase = f"servo step {self.steps} (speed {s:.2f})"
         return Action.move(constrain(self.task, L.apply_action(tcp, action), ref=tcp))

@@ -78,8 +78,9 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "kovis": _kovis,
     "oracle": _oracle,
 }
-AGENT_OBS_MODES = {"oracle": "state", "kovis": "rgbd"}
-"""Agents not listed here see the wrist point cloud."""
+AGENT_ENV = {"oracle": {"obs_mode": "state"}, "kovis": {"obs_mode": "rgbd", "stereo": True}}
+"""The env options (gym.make keywords) a built-in agent needs; agents not listed here see
+the wrist point cloud (`{"obs_mode": "pointcloud"}`)."""
 DEFAULT_AGENT = "cfvs"
 PRIVILEGED = {"oracle"}
 """Factories that take the env itself (they read the truth)."""
@@ -161,16 +162,24 @@ def resolve_agent(name: str) -> Callable[..., Agent]:
     )
 
 
+def agent_env_kwargs(name: str) -> dict:
+    """The gym.make keywords the agent `name` needs: its ManiSkill obs mode and any other
+    env options (an Agent class's `obs_mode` and `env_options`)."""
+    if name in AGENT_ENV:
+        return dict(AGENT_ENV[name])
+    installed = installed_agents()
+    spec = installed.get(name) or (
+        name if ":" in name and not name.startswith(WEIGHTS_PREFIX) else None
+    )
+    if spec is None:
+        return {"obs_mode": "pointcloud"}
+    cls = _user_agent(spec)
+    return {"obs_mode": cls.obs_mode, **cls.env_options}
+
+
 def agent_obs_mode(name: str) -> str:
     """The ManiSkill obs mode the agent `name` needs."""
-    if name in AGENT_OBS_MODES:
-        return AGENT_OBS_MODES[name]
-    installed = installed_agents()
-    if name in installed:
-        return _user_agent(installed[name]).obs_mode
-    if ":" in name and not name.startswith(WEIGHTS_PREFIX):
-        return _user_agent(name).obs_mode
-    return "pointcloud"
+    return agent_env_kwargs(name)["obs_mode"]
 
 
 def make_agent(name: str, env) -> Agent:

@@ -28,7 +28,15 @@ from cfvs_maniskill.envs.task_config import TaskConfig, load_tasks
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.rendering import device
-from cfvs_maniskill.robots.ur5 import CAMERA_UID, TCP_LINK, camera_pose_in_tool, robot_uid_for
+from cfvs_maniskill.robots.ur5 import (
+    CAMERA_FOV,
+    CAMERA_UID,
+    STEREO_UIDS,
+    TCP_LINK,
+    TOOL_LINK,
+    camera_pose_in_tool,
+    robot_uid_for,
+)
 from cfvs_maniskill.sensing.depth import grid_points
 from cfvs_maniskill.sensing.model import GL_TO_CV, SensorModel
 from cfvs_maniskill.sensing.profile import load_profile
@@ -107,9 +115,19 @@ class PegInsertEnv(BaseEnv):
         robot_uids: str | None = None,
         render_backend: str | None = None,
         num_envs: int = 1,
+        stereo: bool = False,
         **kwargs,
     ):
         cfg = self.task
+        if stereo and "pointcloud" in str(kwargs.get("obs_mode", "")):
+            raise ValueError(
+                f"{cfg.env_id}: stereo=True adds the wrist camera's right imager for image "
+                "agents; with obs_mode 'pointcloud' its points would be merged into the "
+                "wrist cloud. Use an image obs mode (rgbd, rgb, rgb+depth)"
+            )
+        self.stereo = stereo
+        """True: the wrist camera also delivers its stereo imagers' lit views (`STEREO_UIDS`;
+        the right one the sensor profile's `imager.stereo_baseline` from the left)."""
         if num_envs != 1:
             raise ValueError(
                 f"{cfg.env_id}: num_envs={num_envs} is not supported: the task's scene "
@@ -182,7 +200,35 @@ class PegInsertEnv(BaseEnv):
 
     @property
     def _default_sensor_configs(self):
-        return []  # the wrist camera belongs to the robot (robots/ur5.py)
+        # The wrist camera belongs to the robot (robots/ur5.py). With `stereo`, the camera
+        # body also delivers its two imagers' lit grey images: the left one where the wrist
+        # camera is, the right one `stereo_baseline` along the image's x (SAPIEN's camera
+        # -y). They use ManiSkill's lit "default" shader: the wrist camera's fast "minimal"
+        # shader draws every face in its flat colour, so a hole's opening would not show.
+        if not self.stereo:
+            return []
+        return [
+            CameraConfig(
+                uid=uid,
+                pose=self._imager_pose(uid),
+                width=self.task.camera_width,
+                height=self.task.camera_height,
+                fov=CAMERA_FOV,
+                near=0.01,
+                far=2.0,
+                mount=self.agent.robot.links_map[TOOL_LINK],
+                shader_pack="default",
+            )
+            for uid in STEREO_UIDS
+        ]
+
+    def _imager_pose(self, uid: str, mount: sapien.Pose | None = None) -> sapien.Pose:
+        """A stereo imager in tool0: the wrist camera's pose (nominal, or on the episode's
+        miscalibrated `mount`), the right one moved by the baseline along the image x."""
+        left = camera_pose_in_tool() * (mount or sapien.Pose())
+        if uid == STEREO_UIDS[0]:
+            return left
+        return left * sapien.Pose(p=[0.0, -self.sensor_profile.imager.stereo_baseline, 0.0])
 
     @property
     def _default_human_render_camera_configs(self):
@@ -484,8 +530,11 @@ class PegInsertEnv(BaseEnv):
         mount really holds it: images come from the true camera, while the cloud is placed
         in the world with the nominal mount, as a robot that trusts its calibration does."""
         self.sensing.start_episode(seed)
-        camera = self.scene.sensors[CAMERA_UID].camera
-        camera.set_local_pose(camera_pose_in_tool() * G.to_pose(self.sensing.mount))
+        mount = G.to_pose(self.sensing.mount)
+        self.scene.sensors[CAMERA_UID].camera.set_local_pose(camera_pose_in_tool() * mount)
+        if self.stereo:  # one rigid camera body: the imagers share the mount's error
+            for uid in STEREO_UIDS:
+                self.scene.sensors[uid].camera.set_local_pose(self._imager_pose(uid, mount))
 
     def _seek_noise(self, seed: int, draws: int) -> None:
         """Put the noise stream where it was after `draws` noisy observations of the

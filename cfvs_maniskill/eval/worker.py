@@ -32,17 +32,17 @@ class Worker:
         # so with it fixed an episode's record does not depend on --workers.
         torch.set_num_threads(1)
         self.cfg = cfg
-        self.envs: dict[tuple[str, str, str], object] = {}
+        self.envs: dict[tuple, object] = {}
         self.agents: dict[tuple[str, str, str], tuple] = {}
 
-    def _env(self, task: str, obs_mode: str, sensor: str):
+    def _env(self, task: str, env_kwargs: dict, sensor: str):
         import gymnasium as gym
 
-        key = (task, obs_mode, sensor)
+        key = (task, tuple(sorted(env_kwargs.items())), sensor)
         if key not in self.envs:
             self.envs[key] = gym.make(
                 f"{task}-v1",
-                obs_mode=obs_mode,
+                **env_kwargs,
                 objects=self.cfg.objects[task],
                 assets=self.cfg.assets,
                 sensor=self.cfg.sensor_files.get(sensor, sensor),
@@ -51,11 +51,11 @@ class Worker:
 
     def _agent(self, task: str, name: str, sensor: str):
         from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-        from cfvs_maniskill.agents.registry import agent_obs_mode, make_agent
+        from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent
 
         key = (task, name, sensor)
         if key not in self.agents:
-            env = self._env(task, agent_obs_mode(name), sensor)
+            env = self._env(task, agent_env_kwargs(name), sensor)
             executor = Executor(env, ExecutorConfig(search_radius=self.cfg.search_radius))
             self.agents[key] = (env, make_agent(name, env), executor)
         return self.agents[key]

@@ -1,37 +1,88 @@
-"""Wrist-camera images for the image-based baseline (KOVIS), shared by collection and agent.
+"""Wrist stereo images for the image-based baseline (KOVIS), shared by collection and agent.
 
-KOVIS sees a grayscale image and learns to reconstruct depth from it; both are taken from
-the same wrist camera the point-cloud agents use (obs mode "rgbd") and halved to
-IMAGE_SIZE by 2 x 2 averaging (cheap on a CPU, and the paper's KOVIS runs at 96 px).
+KOVIS sees the grey images of a stereo camera's two imagers (its authors: a RealSense
+D435's infrared pair), cropped square and resized to its 96 x 96 input (`IMAGE_SIZE`).
+Here both come from the env's lit stereo imagers (gym.make(..., stereo=True)), rendered at
+the task's camera resolution and resized by area averaging. Collection also keeps each
+imager's depth and segmentation, the decoder's self-supervision targets (never an input).
 """
 
 from __future__ import annotations
 
 import numpy as np
+import torch
+import torch.nn.functional as F
 
-from cfvs_maniskill.robots.ur5 import CAMERA_UID
+from cfvs_maniskill.robots.ur5 import STEREO_UIDS
 
-IMAGE_SIZE = 64
+IMAGE_SIZE = 96
 DEPTH_RANGE = (0.03, 0.5)
 """Depth is clipped to this range, metres (KOVIS's cam_clip); 0 (nothing seen) -> far."""
+GRAY_MEAN, GRAY_STD = 0.41, 0.26
+"""KOVIS's input normalisation of grey levels in [0, 1]."""
+SEG_BACKGROUND, SEG_PEG, SEG_HOLE = 0, 1, 2
+"""Segmentation classes of the decoder's target."""
 
 
-def _halve(x: np.ndarray, factor: int) -> np.ndarray:
-    h, w = x.shape
-    return x.reshape(h // factor, factor, w // factor, factor).mean(axis=(1, 3))
+def _resize(x: np.ndarray, side: int) -> np.ndarray:
+    """(H, W) -> (side, side) by area averaging (a square image; any size)."""
+    t = torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))[None, None]
+    return F.interpolate(t, size=(side, side), mode="area")[0, 0].numpy()
 
 
-def wrist_images(obs: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(gray uint8 (S, S), depth float32 metres (S, S)) from an rgbd observation."""
-    cam = obs["sensor_data"][CAMERA_UID]
-    rgb = cam["rgb"][0].cpu().numpy().astype(np.float32)
-    depth = cam["depth"][0, ..., 0].cpu().numpy().astype(np.float32) / 1000.0
-    depth = np.where(depth <= 0, DEPTH_RANGE[1], depth).clip(*DEPTH_RANGE)
-    factor = rgb.shape[0] // IMAGE_SIZE
-    if factor < 1 or rgb.shape[0] != rgb.shape[1] or rgb.shape[0] % IMAGE_SIZE:
+def _check(uid: str, obs: dict) -> dict:
+    data = obs.get("sensor_data", {}).get(uid)
+    if data is None or "rgb" not in data:
         raise ValueError(
-            f"wrist camera is {rgb.shape[1]}x{rgb.shape[0]}; KOVIS needs a square image whose "
-            f"side is a multiple of {IMAGE_SIZE} (task fields camera_width / camera_height)"
+            f"the observation has no '{uid}' rgb image: make the env with stereo=True and an "
+            "image obs mode (e.g. gym.make(env_id, obs_mode='rgbd', stereo=True))"
         )
-    gray = rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-    return _halve(gray, factor).round().astype(np.uint8), _halve(depth, factor).astype(np.float32)
+    rgb = data["rgb"]
+    if rgb.shape[1] != rgb.shape[2]:
+        raise ValueError(
+            f"wrist imager '{uid}' is {rgb.shape[2]}x{rgb.shape[1]}; KOVIS needs a square image "
+            "(task fields camera_width / camera_height)"
+        )
+    return data
+
+
+def stereo_images(obs: dict, side: int = IMAGE_SIZE) -> np.ndarray:
+    """(2, side, side) uint8 grey images of the left and right imager."""
+    out = []
+    for uid in STEREO_UIDS:
+        rgb = _check(uid, obs)["rgb"][0].cpu().numpy().astype(np.float32)
+        gray = rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+        out.append(_resize(gray, side).round().clip(0, 255).astype(np.uint8))
+    return np.stack(out)
+
+
+def stereo_targets(obs: dict, seg_ids: dict[int, int], side: int = IMAGE_SIZE):
+    """The decoder's targets per imager: depth (2, side, side) float16 metres, clipped to
+    DEPTH_RANGE, and segmentation (2, side, side) uint8 classes (`seg_ids`: the scene's
+    per-object ids -> SEG_PEG / SEG_HOLE; anything else is background)."""
+    depths, segs = [], []
+    for uid in STEREO_UIDS:
+        data = _check(uid, obs)
+        d = data["depth"][0, ..., 0].cpu().numpy().astype(np.float32) / 1000.0
+        d = np.where(d <= 0, DEPTH_RANGE[1], d).clip(*DEPTH_RANGE)
+        depths.append(_resize(d, side).astype(np.float16))
+        ids = data["segmentation"][0, ..., 0].cpu().numpy()
+        cls = np.zeros(ids.shape, np.uint8)
+        for k, v in seg_ids.items():
+            cls[ids == k] = v
+        n = ids.shape[0]
+        pick = (np.arange(side) * n) // side  # nearest: classes do not average
+        segs.append(cls[np.ix_(pick, pick)])
+    return np.stack(depths), np.stack(segs)
+
+
+def normalise(gray: torch.Tensor) -> torch.Tensor:
+    """(..., S, S) uint8 or float grey levels -> float, KOVIS's normalisation."""
+    return (gray.float() / 255.0 - GRAY_MEAN) / GRAY_STD
+
+
+def depth_normalise(depth: torch.Tensor) -> torch.Tensor:
+    """Metres -> the decoder's depth target scale ((x - 0.5) / 0.25 of [0, 1] over
+    DEPTH_RANGE, as KOVIS normalises its depth images)."""
+    lo, hi = DEPTH_RANGE
+    return ((depth.float() - lo) / (hi - lo) - 0.5) / 0.25

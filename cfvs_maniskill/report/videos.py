@@ -66,12 +66,12 @@ def render(
 
     import cfvs_maniskill  # noqa: F401  (render device, task registration)
     from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-    from cfvs_maniskill.agents.registry import agent_obs_mode, make_agent
+    from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.rendering.film import Film
 
     out.mkdir(parents=True, exist_ok=True)
-    envs: dict[tuple[str, str, str], object] = {}
+    envs: dict[tuple, object] = {}
     objects: dict[str, set[str]] = {}
     for r in picks:
         objects.setdefault(r["task"], set()).add(r["object"])
@@ -83,13 +83,13 @@ def render(
             ok, _, reason = meta.read_text().partition(" ")
             videos.append(Video(rec, path, ok == "success", reason.strip()))
             continue
-        obs_mode = agent_obs_mode(rec["agent"])
+        env_kwargs = agent_env_kwargs(rec["agent"])
         sensor = rec.get("sensor", "ideal")
-        key = (rec["task"], obs_mode, sensor)
+        key = (rec["task"], tuple(sorted(env_kwargs.items())), sensor)
         if key not in envs:
             envs[key] = gym.make(
                 f"{rec['task']}-v1",
-                obs_mode=obs_mode,
+                **env_kwargs,
                 sensor=sensor,
                 objects=sorted(objects[rec["task"]]),
                 assets=[str(a) for a in assets],

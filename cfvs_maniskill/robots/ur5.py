@@ -63,6 +63,8 @@ HOME_QPOS = np.array([0.0, -1.9, 1.9, -1.571, -1.571, 0.0])
 TCP_LINK = "tcp"
 TOOL_LINK = "tool0"
 CAMERA_UID = "wrist_camera"
+STEREO_UIDS = ("wrist_left", "wrist_right")
+"""The wrist camera's two stereo imagers (envs made with stereo=True; image agents, KOVIS)."""
 CAMERA_OFFSET = np.array([0.11, 0.0, 0.05])
 """Camera position in tool0 (m): 11 cm off the tool axis, 5 cm forward of the flange on a
 bracket, so its view of the hole passes beside the peg even 5 cm above the hole."""

@@ -1,7 +1,7 @@
 """Sensor profiles: one small YAML file each in `sensors/` (or any path), chosen per run with
 `--sensor NAME`. A profile says how the wrist depth camera errs, how far off the hand-eye
-calibration is, and how noisy the wrist force/torque sensor is; nothing downstream may
-assume one profile's numbers. Unknown fields and profiles are errors that name them."""
+calibration is, how noisy the wrist force/torque sensor is, and how far apart the
+camera's two imagers are; nothing downstream may assume one profile's numbers. Unknown fields and profiles are errors that name them."""
 
 from __future__ import annotations
 
@@ -89,6 +89,16 @@ class Wrench:
 
 
 @dataclass(frozen=True)
+class Imager:
+    """The wrist camera's image pair, for image-based agents (KOVIS sees both imagers of a
+    stereo camera, as its authors did with a RealSense D435's infrared pair)."""
+
+    stereo_baseline: float = 0.05
+    """Distance from the wrist camera (the left imager) to the right imager, m. Default: the
+    RealSense D435's 50 mm (Intel D400 datasheet), the camera KOVIS was built with."""
+
+
+@dataclass(frozen=True)
 class SensorProfile:
     name: str
     description: str = ""
@@ -97,11 +107,12 @@ class SensorProfile:
     depth: DepthModel = field(default_factory=DepthModel)
     hand_eye: HandEye = field(default_factory=HandEye)
     wrench: Wrench = field(default_factory=Wrench)
+    imager: Imager = field(default_factory=Imager)
     source: str = ""
     """The file it was read from."""
 
 
-_SECTIONS = {"depth": DepthModel, "hand_eye": HandEye, "wrench": Wrench}
+_SECTIONS = {"depth": DepthModel, "hand_eye": HandEye, "wrench": Wrench, "imager": Imager}
 
 
 def _section(path: Path, name: str, cls, data: Any):
@@ -159,6 +170,8 @@ def load_profile_file(path: Path) -> SensorProfile:
         raise SensorProfileError(
             path, "depth.focal_px", "a stereo model needs focal_px > 0 and baseline > 0"
         )
+    if profile.imager.stereo_baseline <= 0:
+        raise SensorProfileError(path, "imager.stereo_baseline", "expected a distance > 0, m")
     if d.min_range >= d.max_range:
         raise SensorProfileError(path, "depth.min_range", "expected min_range < max_range")
     for k in ("edge_dropout", "edge_flying"):

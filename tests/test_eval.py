@@ -404,3 +404,17 @@ def test_an_installed_package_names_its_agent_through_the_entry_point_group(tmp_
     assert r.returncode == 0, r.stderr[-2000:]
     (row,) = [json.loads(x) for x in (tmp_path / "out" / "episodes.jsonl").read_text().splitlines()]
     assert row["agent"] == "top_face" and row["steps"] > 0
+
+
+def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys):
+    """KOVIS has weights for the round peg only: its square-peg tasks are skipped with a
+    line naming the missing file; asked for square-peg tasks alone, eval exits 2."""
+    from cfvs_maniskill.eval.__main__ import unbuildable
+
+    skip = unbuildable(["kovis", "cfvs"], ["PegInsert3DoF", "PegInsert4DoF"])
+    assert skip == {("PegInsert4DoF", "kovis")}
+    out = capsys.readouterr().out
+    assert "skipping PegInsert4DoF x kovis" in out and "square.pt" in out
+    with pytest.raises(SystemExit) as e:
+        unbuildable(["kovis"], ["PegInsert4DoF", "PegInsert6DoF"])
+    assert e.value.code == 2

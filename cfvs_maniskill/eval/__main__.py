@@ -101,6 +101,32 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
     return out
 
 
+def unbuildable(agents: list[str], tasks: list[str]) -> set[tuple[str, str]]:
+    """(task, agent) pairs whose agent cannot be built for the task (e.g. no trained
+    weights for its peg): each skipped with one line saying why; an agent that can run
+    none of the tasks -> exit 2."""
+    from cfvs_maniskill import TASKS
+    from cfvs_maniskill.agents.interface import TaskSpec
+    from cfvs_maniskill.agents.registry import PRIVILEGED, resolve_agent
+    from cfvs_maniskill.nets.checkpoint import WeightsError
+
+    skip: set[tuple[str, str]] = set()
+    for a in agents:
+        if a in PRIVILEGED:
+            continue  # built from the env itself: nothing to check beforehand
+        reasons = []
+        for t in tasks:
+            try:
+                resolve_agent(a)(TaskSpec.of(TASKS[t]))
+            except (WeightsError, ValueError) as e:
+                print(f"skipping {t} x {a}: {e}")
+                skip.add((t, a))
+                reasons.append(str(e))
+        if tasks and len(reasons) == len(tasks):
+            _fail(f"agent '{a}' can run none of the tasks {tasks}: {reasons[0]}")
+    return skip
+
+
 def sensor_files(sensors: tuple[str, ...]) -> dict[str, str]:
     """Profile name -> name or file; an unknown profile or a bad file -> exit 2 naming it."""
     from cfvs_maniskill.sensing.profile import load_profile
@@ -125,6 +151,7 @@ def main(args: EvalArgs) -> int:
 
     objects = resolve(args)
     files = sensor_files(args.sensors)
+    skip = unbuildable(list(args.agents), list(objects))
     jobs = make_jobs(
         objects,
         list(args.agents),
@@ -133,6 +160,7 @@ def main(args: EvalArgs) -> int:
         args.seed,
         list(files),
     )
+    jobs = [j for j in jobs if (j.task, j.agent) not in skip]
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "episodes.jsonl"
     try:

@@ -111,6 +111,21 @@ class Batches:
         return out
 
 
+def resume_state(args, sha, free: tuple[str, ...]) -> tuple[Path, dict, dict | None]:
+    """(OUT.resume path, the run's key, the saved state or None). The key is every argument
+    but the `free` ones (e.g. --max-minutes); a state saved by another run -> DatasetError."""
+    path = args.out.with_name(args.out.name + ".resume")
+    key = {k: str(v) for k, v in dataclasses.asdict(args).items() if k not in free}
+    if not path.exists():
+        return path, key, None
+    blob = torch.load(path, map_location="cpu", weights_only=False)
+    if blob["run_key"] != key or blob["data_sha256"] != sha:
+        raise DatasetError(
+            f"{path}: a resume state from other arguments or data; delete it or use another --out"
+        )
+    return path, key, blob
+
+
 def update(opt, sched, loss: torch.Tensor, parts: dict, bar=None) -> None:
     """One optimiser + schedule step; show the losses on the progress bar if given."""
     opt.zero_grad()
@@ -215,20 +230,9 @@ def train(args: TrainArgs) -> dict:
     sched = torch.optim.lr_scheduler.OneCycleLR(
         opt, max_lr=args.lr, total_steps=args.epochs * steps_per_epoch, pct_start=0.1
     )
-    resume_path = args.out.with_name(args.out.name + ".resume")
-    run_key = {
-        k: str(v)
-        for k, v in dataclasses.asdict(args).items()
-        if k not in ("max_minutes", "threads")
-    }
+    resume_path, run_key, blob = resume_state(args, sha, ("max_minutes", "threads"))
     state = {"epoch": 0, "history": [], "wall_s": 0.0}
-    if resume_path.exists():
-        blob = torch.load(resume_path, map_location="cpu", weights_only=False)
-        if blob["run_key"] != run_key or blob["data_sha256"] != sha:
-            raise DatasetError(
-                f"{resume_path}: a resume state from other arguments or data; "
-                "delete it or use another --out"
-            )
+    if blob is not None:
         model.load_state_dict(blob["state_dict"])
         opt.load_state_dict(blob["optimizer"])
         sched.load_state_dict(blob["scheduler"])

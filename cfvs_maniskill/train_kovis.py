@@ -31,7 +31,7 @@ from cfvs_maniskill.data.store import DatasetError, load_sets
 from cfvs_maniskill.nets.checkpoint import file_sha256, save_atomic, write_weights
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig, kovis_loss, motion_targets
 from cfvs_maniskill.perception.images import DEPTH_RANGE, depth_normalise, normalise
-from cfvs_maniskill.train import cli_main
+from cfvs_maniskill.train import cli_main, resume_state
 
 FIELDS = ("images", "depth", "seg", "twist", "valid")
 
@@ -209,20 +209,10 @@ def train(args: TrainKOVISArgs) -> dict:
     total = args.epochs * steps
     record = sets.record(file_sha256)
     sha = record["data_sha256"]
-    resume_path = args.out.with_name(args.out.name + ".resume")
-    run_key = {
-        k: str(v)
-        for k, v in dataclasses.asdict(args).items()
-        if k not in ("max_minutes", "checkpoint_minutes", "threads")
-    }
+    free = ("max_minutes", "checkpoint_minutes", "threads")
+    resume_path, run_key, blob = resume_state(args, sha, free)
     state = {"epoch": 0, "step": 0, "history": [], "wall_s": 0.0}
-    if resume_path.exists():
-        blob = torch.load(resume_path, map_location="cpu", weights_only=False)
-        if blob["run_key"] != run_key or blob["data_sha256"] != sha:
-            raise DatasetError(
-                f"{resume_path}: a resume state from other arguments or data; "
-                "delete it or use another --out"
-            )
+    if blob is not None:
         model.load_state_dict(blob["state_dict"])
         opt.load_state_dict(blob["optimizer"])
         state = blob["state"]

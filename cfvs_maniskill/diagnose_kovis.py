@@ -50,8 +50,9 @@ def diagnose(args: DiagnoseArgs) -> dict:
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.agents.kovis import MOTION_DIMS, KOVISAgent
     from cfvs_maniskill.agents.registry import agent_env_kwargs
-    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, PROJECT_ROOT
     from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.nets.checkpoint import file_sha256
     from cfvs_maniskill.perception import labels as L
     from cfvs_maniskill.task_dof import constrain
 
@@ -87,6 +88,7 @@ def diagnose(args: DiagnoseArgs) -> dict:
             return action, s
 
     agent = Probe(TaskSpec.of(u.task))
+    weights = agent.cfg.weights_dir / f"{agent.task.peg}.pt"
     ex = Executor(env)
     episodes = []
     for init in ("small", "large"):
@@ -126,7 +128,8 @@ def diagnose(args: DiagnoseArgs) -> dict:
     out = {
         "task": args.task,
         "sensor": args.sensor,
-        "weights": str(agent.cfg.weights_dir),
+        "weights": str(weights).replace(f"{PROJECT_ROOT}/", ""),
+        "weights_sha256": file_sha256(weights),
         "episodes": episodes,
         "success": {
             i: float(np.mean([e["success"] for e in episodes if e["init"] == i]))

@@ -144,3 +144,20 @@ def test_kovis_servos_towards_the_hole(make_env):
     results = _episodes(make_env, "kovis", "PegInsert3DoF", ["cuboid_train_a"], range(300, 304))
     assert all(r.lateral_offset_m < 0.05 for r in results), [r.lateral_offset_m for r in results]
     assert all(r.success or r.reason for r in results)
+
+
+@pytest.mark.slow
+def test_kovis_diagnosis_compares_each_decision_with_the_truth(tmp_path):
+    """diagnose_kovis logs every servo decision of its episodes (one per distance here) in
+    distance bins and writes both files; the weights it measured are named and hashed."""
+    import json
+
+    from cfvs_maniskill.diagnose_kovis import DiagnoseArgs, diagnose
+
+    out = diagnose(DiagnoseArgs(episodes=1, out=tmp_path))
+    assert [e["init"] for e in out["episodes"]] == ["small", "large"]
+    decisions = sum(e["decisions"] for e in out["episodes"])
+    assert decisions >= 2 and sum(b["decisions"] for b in out["bins"]) == decisions
+    saved = json.loads((tmp_path / "diagnosis.json").read_text())
+    assert saved["weights"] == "agents/kovis/round.pt" and len(saved["weights_sha256"]) == 64
+    assert "direction error" in (tmp_path / "diagnosis.md").read_text()

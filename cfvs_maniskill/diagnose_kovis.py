@@ -48,11 +48,12 @@ def diagnose(args: DiagnoseArgs) -> dict:
 
     from cfvs_maniskill.agents.executor import Executor
     from cfvs_maniskill.agents.interface import TaskSpec
-    from cfvs_maniskill.agents.kovis import MOTION_DIMS, KOVISAgent
+    from cfvs_maniskill.agents.kovis import KOVISAgent
     from cfvs_maniskill.agents.registry import agent_env_kwargs
     from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, PROJECT_ROOT
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.nets.checkpoint import file_sha256
+    from cfvs_maniskill.nets.kovis import MOTION_DIMS
     from cfvs_maniskill.perception import labels as L
     from cfvs_maniskill.task_dof import constrain
 

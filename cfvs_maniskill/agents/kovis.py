@@ -26,13 +26,12 @@ from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.nets.checkpoint import load_weights
+from cfvs_maniskill.nets.kovis import MOTION_DIMS
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.images import normalise, stereo_images
 from cfvs_maniskill.task_dof import constrain
 
 WEIGHTS_DIR = AGENTS_DIR / "kovis"
-MOTION_DIMS = {3: [0, 1, 2], 4: [0, 1, 2, 5], 6: [0, 1, 2, 3, 4, 5]}
-"""Which of (dx, dy, dz, rx, ry, rz) a converter with that many outputs drives."""
 
 
 @dataclass

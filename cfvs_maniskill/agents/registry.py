@@ -177,11 +177,6 @@ def agent_env_kwargs(name: str) -> dict:
     return {"obs_mode": cls.obs_mode, **cls.env_options}
 
 
-def agent_obs_mode(name: str) -> str:
-    """The ManiSkill obs mode the agent `name` needs."""
-    return agent_env_kwargs(name)["obs_mode"]
-
-
 def make_agent(name: str, env) -> Agent:
     """The agent `name` for `env`'s task: built from the task's constants alone, except the
     privileged oracle."""

@@ -33,6 +33,7 @@ from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.data import store
 from cfvs_maniskill.data.procedural import procedural_specs
+from cfvs_maniskill.nets.kovis import KOVISConfig
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import (
     MIN_OBJECT_POINTS,
@@ -57,9 +58,9 @@ STEREO_BASELINE_RANGE = (0.015, 0.06)
 (the D405's 18 mm, the D435's 50 mm)."""
 IMAGER_JITTER = (0.005, 2.0)
 """KOVIS randomises the camera pose per image: up to this many m / deg here."""
-KOVIS_TARGET_SIZE = 48
-"""Side of the decoder's depth / segmentation targets (KOVISConfig.heatmap)."""
-ROTATION_SCALE = 5.0
+KOVIS_TARGET_SIZE = KOVISConfig.heatmap
+"""Side of the decoder's depth / segmentation targets."""
+ROTATION_SCALE = KOVISConfig.rot_mul
 """KOVIS's rot_mul: a unit rollout motion turns this many rad per metre travelled."""
 
 
@@ -325,8 +326,7 @@ def _rollout_direction(rng, task, goal: np.ndarray, H: np.ndarray) -> np.ndarray
         w[2] = rng.uniform(-1, 1)
     elif task.dof == 6:
         w = rng.uniform(-1, 1, 3)
-    m = np.concatenate([v * rng.uniform(0.5, 1.0), w]) if task.dof > 3 else v
-    m = np.concatenate([m, np.zeros(6 - len(m))]) if len(m) < 6 else m
+    m = np.concatenate([v * rng.uniform(0.5, 1.0) if task.dof > 3 else v, w])
     return m / np.linalg.norm(m)
 
 

@@ -121,9 +121,9 @@ class PegInsertEnv(BaseEnv):
         cfg = self.task
         if stereo and "pointcloud" in str(kwargs.get("obs_mode", "")):
             raise ValueError(
-                f"{cfg.env_id}: stereo=True adds the wrist camera's right imager for image "
-                "agents; with obs_mode 'pointcloud' its points would be merged into the "
-                "wrist cloud. Use an image obs mode (rgbd, rgb, rgb+depth)"
+                f"{cfg.env_id}: stereo=True adds the wrist camera's two stereo imagers for "
+                "image agents; with obs_mode 'pointcloud' their points would be merged into "
+                "the wrist cloud. Use an image obs mode (rgbd, rgb, rgb+depth)"
             )
         self.stereo = stereo
         """True: the wrist camera also delivers its stereo imagers' lit views (`STEREO_UIDS`;

@@ -234,12 +234,15 @@ class KOVIS(nn.Module):
         return out
 
 
+MOTION_DIMS = {3: [0, 1, 2], 4: [0, 1, 2, 5], 6: [0, 1, 2, 3, 4, 5]}
+"""Which of (dx, dy, dz, rx, ry, rz) a converter with that many outputs drives."""
+
+
 def motion_targets(twist: torch.Tensor, cfg: KOVISConfig) -> tuple[torch.Tensor, torch.Tensor]:
     """Tool-frame body twist to the goal (B, 6): (v, w) with the goal = pose * exp(twist)
     -> unit direction (B, D) and target speed (B,) in [0, 1). Rotation enters the direction
     as w / rot_mul (a unit motion turns rot_mul rad per metre), as KOVIS's rollouts do."""
-    dims = {3: [0, 1, 2], 4: [0, 1, 2, 5], 6: [0, 1, 2, 3, 4, 5]}[cfg.motion_dims]
-    m = twist[:, dims].clone()
+    m = twist[:, MOTION_DIMS[cfg.motion_dims]].clone()
     m[:, 3:] /= cfg.rot_mul
     dist = m.norm(dim=-1)
     return F.normalize(m, dim=-1), 1 - torch.exp(-cfg.a_dist * dist)

@@ -1,7 +1,8 @@
 """Sensor profiles: one small YAML file each in `sensors/` (or any path), chosen per run with
 `--sensor NAME`. A profile says how the wrist depth camera errs, how far off the hand-eye
 calibration is, how noisy the wrist force/torque sensor is, and how far apart the
-camera's two imagers are; nothing downstream may assume one profile's numbers. Unknown fields and profiles are errors that name them."""
+camera's two imagers are; nothing downstream may assume one profile's numbers. Unknown
+fields and profiles are errors that name them."""
 
 from __future__ import annotations
 

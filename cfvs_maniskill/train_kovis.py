@@ -28,7 +28,13 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from cfvs_maniskill.data.store import DatasetError, load_sets
-from cfvs_maniskill.nets.checkpoint import file_sha256, save_atomic, write_weights
+from cfvs_maniskill.nets.checkpoint import (
+    WeightsError,
+    file_sha256,
+    load_weights,
+    save_atomic,
+    write_weights,
+)
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig, kovis_loss, motion_targets
 from cfvs_maniskill.perception.images import DEPTH_RANGE, depth_normalise, normalise
 from cfvs_maniskill.train import cli_main, resume_state
@@ -65,6 +71,10 @@ class TrainKOVISArgs:
     threads: int = 0
     """torch threads (0: all cores)."""
     seed: int = 0
+    init: Path | None = None
+    """Start from these KOVIS weights (continued training): encoder and decoder must have
+    this run's keypoints and growth; the converter is taken too if its --dof matches. The
+    keypoint Gaussian then stays at its final sigma."""
 
 
 # ------------------------------------------------------------------------------ augmentation
@@ -190,6 +200,31 @@ def validate(model: KOVIS, frames: Frames) -> dict[str, float]:
 
 
 # ------------------------------------------------------------------------------ training
+def start_from(model: KOVIS, path: Path) -> dict:
+    """Load `path`'s weights into `model` (see TrainKOVISArgs.init); its record."""
+    init, blob = load_weights(path, "kovis")  # any peg: the encoder sees both
+    have, want = init.cfg, model.cfg
+    for field in ("keypoints", "image", "heatmap", "decode_full", "growth", "seg_classes"):
+        if getattr(have, field) != getattr(want, field):
+            raise WeightsError(
+                f"{path}: field '{field}' is {getattr(have, field)}, this run builds "
+                f"{getattr(want, field)} (--init needs the same encoder and decoder)"
+            )
+    parts = ["encoder", "decoder"]
+    if have.motion_dims == want.motion_dims:
+        parts.append("converter")
+    else:
+        print(f"--init: converter not taken ({have.motion_dims}-DoF, this run {want.motion_dims})")
+    for name in parts:
+        getattr(model, name).load_state_dict(getattr(init, name).state_dict())
+    return {
+        "path": str(path),
+        "sha256": file_sha256(path),
+        "parts": parts,
+        "wall_time_s": blob.get("wall_time_s"),
+    }
+
+
 def train(args: TrainKOVISArgs) -> dict:
     if args.dof not in (3, 4, 6):
         raise DatasetError(f"--dof: expected 3, 4 or 6, got {args.dof}")
@@ -200,7 +235,9 @@ def train(args: TrainKOVISArgs) -> dict:
     val_frames = Frames(sets.data, sets.val_idx)
     cfg = KOVISConfig(keypoints=args.keypoints, growth=args.growth, motion_dims=args.dof)
     torch.manual_seed(args.seed)
-    model = KOVIS(cfg).to(memory_format=torch.channels_last)  # 25% faster convs on CPU
+    model = KOVIS(cfg)
+    started = start_from(model, args.init) if args.init else None
+    model = model.to(memory_format=torch.channels_last)  # 25% faster convs on CPU
     opt = torch.optim.Adam(
         model.parameters(), lr=args.lr, weight_decay=args.weight_decay, amsgrad=True
     )
@@ -241,7 +278,7 @@ def train(args: TrainKOVISArgs) -> dict:
             progress = (epoch * steps + s) / total
             for group in opt.param_groups:
                 group["lr"] = args.lr * repeat_lr(progress)
-            model.sigma = sigma_at(progress, cfg)
+            model.sigma = cfg.sigma[1] if args.init else sigma_at(progress, cfg)
             b = train_frames.batch(order[s * args.batch : (s + 1) * args.batch])
             images = augment(b["images"], b["seg"], bank, rng) if args.augment else b["images"]
             out = forward(model, images)
@@ -280,6 +317,7 @@ def train(args: TrainKOVISArgs) -> dict:
         "config": dataclasses.asdict(cfg),
         "train_frames": len(train_frames),
         **record,
+        "init": started,
     }
     wall = time.perf_counter() - t_start
     meta = write_weights(

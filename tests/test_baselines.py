@@ -161,3 +161,19 @@ def test_kovis_diagnosis_compares_each_decision_with_the_truth(tmp_path):
     saved = json.loads((tmp_path / "diagnosis.json").read_text())
     assert saved["weights"] == "agents/kovis/round.pt" and len(saved["weights_sha256"]) == 64
     assert "direction error" in (tmp_path / "diagnosis.md").read_text()
+
+
+def test_kovis_speed_bootstrapping_keeps_what_is_left_to_learn():
+    """The speed loss keeps the hardest samples by BCE minus the soft target's entropy: a
+    sample already at its target 0.5 (highest BCE, nothing to learn) is dropped in favour of
+    one predicted 0.3 for a target 0.01, and its gradient is zero."""
+    from cfvs_maniskill.nets.kovis import _entropy, _hardest
+
+    target = torch.tensor([0.5, 0.01])
+    logit = torch.logit(torch.tensor([0.5, 0.3])).requires_grad_()
+    bce = torch.nn.functional.binary_cross_entropy_with_logits(logit, target, reduction="none")
+    assert bce[0] > bce[1]  # KOVIS's rule (highest BCE) would pick the first
+    loss = _hardest(bce[None], 0.5, key=(bce - _entropy(target)).detach()[None])
+    assert torch.isclose(loss, bce[1])
+    loss.backward()
+    assert logit.grad[0] == 0 and logit.grad[1] > 0

@@ -343,3 +343,54 @@ def test_training_from_init_weights_starts_where_they_end(coarse_file, tmp_path,
     bad = ["--net", "oakn", "--data", str(coarse_file), "--out", str(tmp_path / "x.pt")]
     assert main([*bad, "--init", str(tmp_path / "nosuch.pt")]) == 2
     assert "nosuch.pt: weights file not found" in capsys.readouterr().err
+
+
+def test_kovis_training_from_init_takes_encoder_and_the_fitting_converter(kovis_file, tmp_path):
+    """`train_kovis --init W`: at lr 0 the run ends in W's weights (recorded with its hash);
+    a converter for another --dof is left fresh while encoder and decoder are taken; an
+    encoder of another growth is refused naming the field."""
+    from cfvs_maniskill.nets.checkpoint import WeightsError, file_sha256, load_weights
+    from cfvs_maniskill.train_kovis import TrainKOVISArgs
+    from cfvs_maniskill.train_kovis import train as train_kovis
+
+    def args(out, **kw):
+        base = dict(data=(kovis_file,), out=out, epochs=1, batch=8, growth=(4, 4, 16), dof=4)
+        return TrainKOVISArgs(**{**base, **kw}, val_fraction=0.2, threads=1)
+
+    first = tmp_path / "first.pt"
+    train_kovis(args(first))
+    again = tmp_path / "again.pt"
+    train_kovis(args(again, init=first, lr=0.0, weight_decay=0.0))
+    a, _ = load_weights(first, "kovis")
+    b, meta = load_weights(again, "kovis")
+    for (k, x), y in zip(a.state_dict().items(), b.state_dict().values(), strict=True):
+        if x.dtype.is_floating_point and "running" not in k:
+            assert torch.equal(x, y), k
+    assert meta["init"]["path"] == str(first) and meta["init"]["sha256"] == file_sha256(first)
+    six = tmp_path / "six.pt"
+    train_kovis(args(six, init=first, lr=0.0, weight_decay=0.0, dof=6))
+    c, meta = load_weights(six, "kovis")
+    assert meta["init"]["parts"] == ["encoder", "decoder"]
+    assert torch.equal(c.encoder.state_dict()["head.weight"], a.encoder.state_dict()["head.weight"])
+    with pytest.raises(WeightsError, match=r"first\.pt: field 'growth'"):
+        train_kovis(args(tmp_path / "x.pt", init=first, growth=(6, 6, 16)))
+
+
+def test_kovis_rollout_step_range_is_kept_and_checked(tmp_path):
+    """`collect --kind kovis --rollout-step MIN MAX`: every rollout's step lies in the range
+    (frame k is k steps from the goal), the file records it, a resume with another range
+    and an empty range are refused naming the field."""
+    out = tmp_path / "far.h5"
+    collect(CollectArgs(task="PegInsert3DoF", kind="kovis", samples=3, out=out,
+                        rollout_step=(0.03, 0.05)))  # fmt: skip
+    attrs, d = load(out)
+    assert attrs["rollout_step"] == "[0.03, 0.05]"
+    for r in range(3):
+        n = int(d["valid"][r].sum())
+        dist = np.linalg.norm(d["twist"][r, 1:n, :3], axis=-1) / np.arange(1, n)
+        assert np.all((dist > 0.03 - 1e-4) & (dist < 0.05 + 1e-4)), dist
+    with pytest.raises(DatasetError, match="field 'rollout_step'"):
+        collect(CollectArgs(task="PegInsert3DoF", kind="kovis", samples=4, out=out))
+    with pytest.raises(DatasetError, match="--rollout-step"):
+        collect(CollectArgs(task="PegInsert3DoF", kind="kovis", samples=4, out=out,
+                            rollout_step=(0.05, 0.03)))  # fmt: skip

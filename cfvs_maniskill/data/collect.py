@@ -51,8 +51,9 @@ CHUNK = 40
 """Samples per crash-safe chunk file."""
 ROLLOUT_FRAMES = 5
 """KOVIS: frames per rollout (its rollout_step)."""
-ROLLOUT_MAX_STEP = 0.07
-"""Longest rollout step, m (KOVIS's longest is 17 mm; ours reach 28 cm in four steps)."""
+ROLLOUT_STEP = (0.001, 0.07)
+"""Rollout step range, m, drawn log-uniformly (KOVIS's steps are 1-17 mm; ours reach 28 cm in
+four steps: the task starts 15-30 cm away)."""
 STEREO_BASELINE_RANGE = (0.015, 0.06)
 """KOVIS randomises the stereo baseline (40-60 mm); ours spans the profiles' imagers too
 (the D405's 18 mm, the D435's 50 mm)."""
@@ -95,10 +96,12 @@ class CollectArgs:
     sensor: str = "ideal"
     """Sensor profile the observations are taken with (sensors/<name>.yaml or a path): train
     on the noise the agent will meet."""
+    rollout_step: tuple[float, float] = ROLLOUT_STEP
+    """kovis: range of a rollout's step, m (log-uniform); e.g. 0.02 0.08 for far views only."""
 
 
 def file_attrs(args: CollectArgs, task) -> dict:
-    return {
+    attrs = {
         "format": store.FORMAT,
         "kind": args.kind,
         "task": args.task,
@@ -115,6 +118,10 @@ def file_attrs(args: CollectArgs, task) -> dict:
         "config": json.dumps({k: str(v) for k, v in dataclasses.asdict(args).items()}),
         "task_config": json.dumps(dataclasses.asdict(task)),
     }
+    if args.kind == "kovis" and tuple(args.rollout_step) != ROLLOUT_STEP:
+        # Only when not the default, so files collected before the option still resume.
+        attrs["rollout_step"] = json.dumps(list(args.rollout_step))
+    return attrs
 
 
 class Collector:
@@ -264,8 +271,8 @@ class Collector:
         for _ in range(20):
             twist = _rollout_direction(rng, task, goal, H)
             # KOVIS's time steps (1-17 mm per step at unit speed) reach 8.5 cm; ours also
-            # cover the task's 15-30 cm starts. Log-uniform: two thirds are KOVIS's range.
-            step = float(np.exp(rng.uniform(np.log(0.001), np.log(ROLLOUT_MAX_STEP))))
+            # cover the task's 15-30 cm starts (default: two thirds within KOVIS's range).
+            step = float(np.exp(rng.uniform(*np.log(self.args.rollout_step))))
             frames = []
             for k in range(ROLLOUT_FRAMES):
                 a = twist * step * k  # goal = pose @ D(a)
@@ -369,6 +376,10 @@ def collect(args: CollectArgs) -> int:
     task = tasks[args.task]
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    if args.kind == "kovis" and not 0 < args.rollout_step[0] <= args.rollout_step[1] <= 0.1:
+        raise store.DatasetError(
+            f"--rollout-step: expected 0 < MIN <= MAX <= 0.1 m, got {args.rollout_step}"
+        )
     attrs = file_attrs(args, task)
     have = store.existing_count(out, attrs)
     if have >= args.samples:

@@ -42,7 +42,7 @@ import numpy as np
 
 FORMAT = "cfvs_maniskill.dataset/1"
 STRING_FIELDS = ("object",)
-MATCH_ATTRS = ("kind", "task", "num_points", "seed", "objects", "procedural")
+MATCH_ATTRS = ("kind", "task", "num_points", "seed", "objects", "procedural", "rollout_step")
 """Arguments that must agree between a file and a run that resumes or extends it."""
 
 

@@ -16,7 +16,7 @@ paper and its public code (enyen/KOVIS_VisualServo), written anew in plain torch
 Losses (`kovis_loss`, as the original's training script): depth smooth-L1 and segmentation
 cross-entropy on both images, direction 1 - cos weighted by the target speed, speed BCE
 (all four "bootstrapped": the hardest fraction of pixels / samples, annealed from all to
-30%), keypoint concentration exp(-20 d) * mu_i * mu_j between every pair, and an "inside"
+30%; the speed's hardest by BCE minus the soft target's entropy, see kovis_loss), keypoint concentration exp(-20 d) * mu_i * mu_j between every pair, and an "inside"
 term that keeps heatmap mass off the background.
 """
 
@@ -248,10 +248,19 @@ def motion_targets(twist: torch.Tensor, cfg: KOVISConfig) -> tuple[torch.Tensor,
     return F.normalize(m, dim=-1), 1 - torch.exp(-cfg.a_dist * dist)
 
 
-def _hardest(x: torch.Tensor, fraction: float) -> torch.Tensor:
-    """Mean of the largest `fraction` of x's last axis (KOVIS's bootstrapping)."""
+def _hardest(x: torch.Tensor, fraction: float, key: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean of x over the largest `fraction` of `key` (default x) along the last axis
+    (KOVIS's bootstrapping)."""
     k = max(1, int(round(fraction * x.shape[-1])))
-    return x.topk(k, dim=-1, sorted=False).values.mean()
+    if key is None:
+        return x.topk(k, dim=-1, sorted=False).values.mean()
+    return x.gather(-1, key.topk(k, dim=-1, sorted=False).indices).mean()
+
+
+def _entropy(p: torch.Tensor) -> torch.Tensor:
+    """Binary entropy (nats): the lowest BCE a soft target p allows."""
+    p = p.clamp(1e-6, 1 - 1e-6)
+    return -(p * p.log() + (1 - p) * (1 - p).log())
 
 
 def kovis_loss(
@@ -288,9 +297,12 @@ def kovis_loss(
     l_dir = _hardest(
         ((1 - F.cosine_similarity(out["direction"], want_dir, dim=-1)) * want_speed)[None], boot
     )
-    l_speed = _hardest(
-        F.binary_cross_entropy_with_logits(out["speed"], want_speed, reduction="none")[None], boot
-    )
+    # Bootstrapped by what is left to learn (BCE - entropy = KL), not by BCE as KOVIS does:
+    # with soft targets the highest BCE belongs to targets near 0.5, whose BCE cannot fall
+    # below their entropy, so KOVIS's rule fed the speed head samples with no gradient left
+    # (measured: a speed head constant to 0.05; agents/kovis/README.md).
+    bce = F.binary_cross_entropy_with_logits(out["speed"], want_speed, reduction="none")
+    l_speed = _hardest(bce[None], boot, key=(bce - _entropy(want_speed)).detach()[None])
     loss = (l_depth + l_seg + l_conc + l_in) / 2 + l_dir + l_speed
     halves = {"depth": l_depth, "seg": l_seg, "conc": l_conc, "inside": l_in}
     parts = {k: float(v.detach()) / 2 for k, v in halves.items()}

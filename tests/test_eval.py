@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -406,10 +407,19 @@ def test_an_installed_package_names_its_agent_through_the_entry_point_group(tmp_
     assert row["agent"] == "top_face" and row["steps"] > 0
 
 
-def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys):
-    """KOVIS has weights for the round peg only: its square-peg tasks are skipped with a
+def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys, monkeypatch, tmp_path):
+    """KOVIS given weights for the round peg only: its square-peg tasks are skipped with a
     line naming the missing file; asked for square-peg tasks alone, eval exits 2."""
+    from cfvs_maniskill.agents import kovis as K
     from cfvs_maniskill.eval.__main__ import unbuildable
+
+    shutil.copy(K.WEIGHTS_DIR / "round.pt", tmp_path / "round.pt")
+    build = K.KOVISAgent.__init__
+    monkeypatch.setattr(
+        K.KOVISAgent,
+        "__init__",
+        lambda self, task, cfg=None: build(self, task, K.KOVISAgentConfig(weights_dir=tmp_path)),
+    )
 
     skip = unbuildable(["kovis", "cfvs"], ["PegInsert3DoF", "PegInsert4DoF"])
     assert skip == {("PegInsert4DoF", "kovis")}

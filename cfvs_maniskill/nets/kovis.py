@@ -16,8 +16,9 @@ paper and its public code (enyen/KOVIS_VisualServo), written anew in plain torch
 Losses (`kovis_loss`, as the original's training script): depth smooth-L1 and segmentation
 cross-entropy on both images, direction 1 - cos weighted by the target speed, speed BCE
 (all four "bootstrapped": the hardest fraction of pixels / samples, annealed from all to
-30%; the speed's hardest by BCE minus the soft target's entropy, see kovis_loss), keypoint concentration exp(-20 d) * mu_i * mu_j between every pair, and an "inside"
-term that keeps heatmap mass off the background.
+30%; the speed's hardest by BCE minus the soft target's entropy, see kovis_loss),
+keypoint concentration exp(-20 d) * mu_i * mu_j between every pair, and an "inside" term
+that keeps heatmap mass off the background.
 """
 
 from __future__ import annotations

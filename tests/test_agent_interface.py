@@ -52,7 +52,7 @@ def _reachable(root, limit: int = 20000):
 
 @pytest.mark.parametrize("name", [a for a in AGENTS if a not in PRIVILEGED])
 def test_agents_cannot_reach_the_env(make_env, name):
-    env_id = "PegInsert3DoF-v1" if name == "kovis" else ENV_ID  # KOVIS: round weights only
+    env_id = "PegInsert3DoF-v1" if name == "kovis" else ENV_ID  # KOVIS: stereo on 3-DoF
     env = make_env(env_id, **agent_env_kwargs(name))
     agent = make_agent(name, env)
     assert not agent.privileged

@@ -139,8 +139,8 @@ def test_give_up_on_an_empty_cloud(make_env):
 def test_kovis_servos_towards_the_hole(make_env):
     """KOVIS (shipped round weights, stereo images), 3-DoF from 15 cm on a training cuboid:
     every episode ends with the peg within 5 cm of the hole axis, closed loop from its
-    images alone (untrained weights wander off: 9.5 cm in one try). Its measured precision
-    (about 2 cm, so it seldom inserts) is in agents/kovis/README.md."""
+    images alone (untrained weights wander off: 9.5 cm in one try). Its measured success
+    and precision are in agents/kovis/README.md."""
     results = _episodes(make_env, "kovis", "PegInsert3DoF", ["cuboid_train_a"], range(300, 304))
     assert all(r.lateral_offset_m < 0.05 for r in results), [r.lateral_offset_m for r in results]
     assert all(r.success or r.reason for r in results)

@@ -53,7 +53,7 @@ def diagnose(args: DiagnoseArgs) -> dict:
     from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, PROJECT_ROOT
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.nets.checkpoint import file_sha256
-    from cfvs_maniskill.nets.kovis import MOTION_DIMS
+    from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
     from cfvs_maniskill.perception import labels as L
     from cfvs_maniskill.task_dof import constrain
 
@@ -77,12 +77,11 @@ def diagnose(args: DiagnoseArgs) -> dict:
             )
             true = L.fine_action(tcp, goal)
             dims = MOTION_DIMS[self.task.dof]
-            cfg = self.net.cfg
             rows.append(
                 {
                     "episode": self.episode,
                     "distance": float(np.linalg.norm(true[:3])),
-                    "implied": float(-np.log1p(-min(s, 0.9999)) / cfg.a_dist),
+                    "implied": implied_distance(s, self.net.cfg),
                     "direction_err_deg": _angle(action[dims], true[dims]),
                 }
             )

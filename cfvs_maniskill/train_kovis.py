@@ -35,7 +35,13 @@ from cfvs_maniskill.nets.checkpoint import (
     save_atomic,
     write_weights,
 )
-from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig, kovis_loss, motion_targets
+from cfvs_maniskill.nets.kovis import (
+    KOVIS,
+    KOVISConfig,
+    implied_distance,
+    kovis_loss,
+    motion_targets,
+)
 from cfvs_maniskill.perception.images import DEPTH_RANGE, depth_normalise, normalise
 from cfvs_maniskill.train import cli_main, resume_state
 
@@ -175,7 +181,7 @@ def validate(model: KOVIS, frames: Frames) -> dict[str, float]:
         )
         far.append(ang[d > 0.01])
         near.append(ang[(d > 0.002) & (d <= 0.01)])
-        d_hat = -torch.log1p(-s.clamp(max=0.9999)) / cfg.a_dist
+        d_hat = implied_distance(s, cfg)
         m = d < 0.02
         dist_err.append((d_hat[m] - d[m]).abs())
         at_goal.append(s[d < 1e-4])

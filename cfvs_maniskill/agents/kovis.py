@@ -26,7 +26,7 @@ from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.nets.checkpoint import load_weights
-from cfvs_maniskill.nets.kovis import MOTION_DIMS
+from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.images import normalise, stereo_images
 from cfvs_maniskill.task_dof import constrain
@@ -83,8 +83,7 @@ class KOVISAgent(Agent):
         out = self.net(x[:, :1], x[:, 1:], decode=False)
         cfg = self.net.cfg
         s = float(torch.sigmoid(out["speed"][0]))
-        distance = -np.log1p(-min(s, 0.9999)) / cfg.a_dist
-        length = min(self.cfg.gain * distance, self.cfg.max_step)
+        length = min(self.cfg.gain * implied_distance(s, cfg), self.cfg.max_step)
         step = out["direction"][0].numpy().astype(np.float64) * length
         dims = MOTION_DIMS[cfg.motion_dims]
         action = np.zeros(6)

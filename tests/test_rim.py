@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cfvs_maniskill.perception.rim import MAX_TURN_DEG, align_axis, rim_normal
+from cfvs_maniskill.perception.rim import MAX_TURN_DEG, _least_median, align_axis, rim_normal
 
 HALF = 0.025 * np.sqrt(2)  # a 50 mm square hole's corner
 
@@ -60,3 +60,31 @@ def test_align_axis_turns_z_onto_the_normal_and_keeps_the_origin():
     assert np.allclose(out[:3, 2], normal) and np.allclose(out[:3, 3], H[:3, 3])
     assert np.allclose(out[:3, :3] @ out[:3, :3].T, np.eye(3))
     assert _angle(out[:3, 0], H[:3, 0]) < _angle(normal, H[:3, 2]) + 1e-6  # smallest turn
+
+
+def test_the_pruned_least_median_picks_what_every_median_picks_bit_for_bit():
+    """The fit skips the medians of planes that cannot win; its choice, median and
+    distances must be exactly those of the plain rule (argmin of every plane's median),
+    also on float64 clouds, quantised clouds (ties) and even point counts."""
+    rng = np.random.default_rng(3)
+    for trial in range(60):
+        n = int(rng.integers(60, 2500))
+        pts = np.column_stack([rng.uniform(-0.05, 0.05, (n, 2)), np.zeros(n)])
+        pts[:, 2] += rng.normal(0, [0.0, 1e-5, 1e-3, 3e-3][trial % 4], n)
+        pts[: int(rng.uniform(0, 0.45) * n), 2] += 0.006  # a step holding up to 45%
+        if trial % 5 == 0:
+            pts = np.round(pts, 3)  # millimetre steps: many equal distances
+        R = Rotation.random(random_state=trial).as_matrix()
+        ring = (pts @ R.T + rng.uniform(-0.6, 0.6, 3)).astype(
+            np.float64 if trial % 3 == 0 else np.float32
+        )
+        tri = ring[rng.integers(n, size=(200, 3))]
+        normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        norms = np.linalg.norm(normals, axis=1)
+        keep = norms > 1e-9
+        normals, origins = normals[keep] / norms[keep, None], tri[keep, 0]
+        every = ((ring[None] - origins[:, None]) @ normals[..., None])[..., 0]
+        med = np.median(every**2, axis=1)
+        best, med_best, residual = _least_median(ring, origins, normals)
+        assert best == int(np.argmin(med)), trial
+        assert med_best == med[best] and np.array_equal(residual, every[best]), trial

@@ -101,7 +101,7 @@ def _least_median(ring: np.ndarray, origins: np.ndarray, normals: np.ndarray):
     The same answer, bit for bit, as taking the median of every hypothesis's squared
     distances (what an episode's rim fit cost most of its time on: ~2000 points x 200
     planes), but those medians are computed only for the planes that can win. A few likely
-    winners, ranked on every 8th point, set a bound b; a plane whose lower middle squared
+    winners, ranked on every 16th point, set a bound b; a plane whose lower middle squared
     distance exceeds b has a median above b and is skipped. That test runs on distances
     computed in another order, which may differ from the exact ones in the last bits, so
     it keeps a margin far above that rounding."""

@@ -71,6 +71,9 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     # The fine stage trained on the ideal sensor's clouds only (the weights before the
     # sensor-mixed OPN): what training on the sensors' noise buys.
     "cfvs_ideal_data": _cfvs("cfvs_ideal_data", weights="ideal_data", rim_plane=False),
+    # The fine loop run to a tighter stop (e_t 1.0 mm, default 1.5 mm): the precision
+    # against servo time trade of the closed-loop residual (docs/results.md).
+    "cfvs_et1": _cfvs("cfvs_et1", tol_translation=0.001),
     # The paper's baselines (Table II).
     "icp": _icp("workspace"),
     "icp_kpts": _icp("oakn"),

@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cfvs_maniskill.perception.rim import MAX_TURN_DEG, _least_median, align_axis, rim_normal
+from cfvs_maniskill.perception.rim import (
+    MAX_TURN_DEG,
+    _hypotheses,
+    _least_median,
+    align_axis,
+    rim_normal,
+)
 
 HALF = 0.025 * np.sqrt(2)  # a 50 mm square hole's corner
 
@@ -78,11 +84,7 @@ def test_the_pruned_least_median_picks_what_every_median_picks_bit_for_bit():
         ring = (pts @ R.T + rng.uniform(-0.6, 0.6, 3)).astype(
             np.float64 if trial % 3 == 0 else np.float32
         )
-        tri = ring[rng.integers(n, size=(200, 3))]
-        normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        norms = np.linalg.norm(normals, axis=1)
-        keep = norms > 1e-9
-        normals, origins = normals[keep] / norms[keep, None], tri[keep, 0]
+        origins, normals = _hypotheses(ring, rng)
         every = ((ring[None] - origins[:, None]) @ normals[..., None])[..., 0]
         med = np.median(every**2, axis=1)
         best, med_best, residual = _least_median(ring, origins, normals)

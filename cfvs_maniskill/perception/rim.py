@@ -72,14 +72,10 @@ def _plane_normal(ring: np.ndarray, axis: np.ndarray, rng: np.random.Generator):
     # Least median of squares: the plane through 3 random points that leaves the smallest
     # median squared distance; then a least-squares fit to the points within 2.5 robust
     # sigmas of it (sigma from that median: the sensor's noise, whatever the sensor).
-    tri = ring[rng.integers(len(ring), size=(HYPOTHESES, 3))]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    norms = np.linalg.norm(normals, axis=1)
-    ok = norms > 1e-9
-    if not ok.any():
+    origins, normals = _hypotheses(ring, rng)
+    if len(normals) == 0:
         return None
-    normals, tri = normals[ok] / norms[ok, None], tri[ok]
-    best, med_best, residual = _least_median(ring, tri[:, 0], normals)
+    _, med_best, residual = _least_median(ring, origins, normals)
     sigma = 1.4826 * (1 + 5 / (len(ring) - 3)) * np.sqrt(med_best)
     inliers = ring[np.abs(residual) <= 2.5 * sigma + 1e-6]
     if len(inliers) < MIN_RING_POINTS // 2:
@@ -87,6 +83,16 @@ def _plane_normal(ring: np.ndarray, axis: np.ndarray, rng: np.random.Generator):
     _, _, vt = np.linalg.svd(inliers - inliers.mean(axis=0), full_matrices=False)
     n = vt[2]
     return n if n @ axis >= 0 else -n
+
+
+def _hypotheses(ring: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """HYPOTHESES planes through random point triples of the ring: (origins, unit normals),
+    each (h, 3), degenerate (collinear) triples left out."""
+    tri = ring[rng.integers(len(ring), size=(HYPOTHESES, 3))]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norms = np.linalg.norm(normals, axis=1)
+    ok = norms > 1e-9
+    return tri[ok, 0], normals[ok] / norms[ok, None]
 
 
 def _signed_distances(ring: np.ndarray, origins: np.ndarray, normals: np.ndarray) -> np.ndarray:

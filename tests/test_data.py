@@ -157,6 +157,38 @@ def test_featured_procedural_bodies_put_a_block_or_notch_beside_the_hole(tmp_pat
     assert (folder2 / f"{names[0]}.yaml").read_text() == first
 
 
+def test_part_like_procedural_bodies_are_tall_with_inclined_faces_around_the_hole(
+    tmp_path, monkeypatch
+):
+    """`--procedural-parts`: bodies 10-26 cm tall whose opening sits on what is left of the
+    top face, with inclined planar faces (neither flat nor vertical) falling away from it,
+    every one a valid, buildable training object."""
+    import trimesh
+
+    from cfvs_maniskill.data.procedural import PART_HEIGHT
+    from cfvs_maniskill.objects.build import build_geometry
+
+    monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
+    folder, names = procedural_specs(4, 7, "square", 0.004, 0.045, parts=True)
+    lib = load_library([folder])
+    assert not lib.errors
+    inclined = 0
+    for n in names:
+        spec = lib.specs[n]
+        assert spec.split == "train" and spec.body_kind == "mesh" and spec.hole_frame
+        build_geometry(spec, "square", 0.004, 0.045)
+        body = trimesh.load(folder / spec.body["file"])
+        top = spec.hole_frame[0][2]
+        assert PART_HEIGHT[0] <= top <= PART_HEIGHT[1] + 1e-6
+        assert body.bounds[1, 2] == pytest.approx(top, abs=1e-6)  # nothing above the opening
+        nz = np.abs(body.face_normals[:, 2])
+        slanted = body.area_faces[(nz > 0.3) & (nz < 0.97)].sum()
+        inclined += slanted > 1e-3  # at least 10 cm^2 of inclined face
+    assert inclined >= 3, f"only {inclined} of 4 bodies have an inclined face"
+    with pytest.raises(ValueError, match="features and parts"):
+        procedural_specs(4, 7, "square", 0.004, 0.045, features=True, parts=True)
+
+
 @pytest.mark.slow
 def test_resume_after_kill_gives_exactly_n_unique_samples(tmp_path):
     """SIGKILL a collection after its first chunk, run it again: N samples, each once,

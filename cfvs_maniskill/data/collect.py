@@ -87,6 +87,9 @@ class CollectArgs:
     procedural_features: bool = False
     """With --procedural: mesh bodies with a raised block (wall, step, boss) and / or a notch
     (edge, inner corner) beside a hole placed anywhere its walls allow."""
+    procedural_parts: bool = False
+    """With --procedural: tall bodies (10-26 cm) cut like machined parts: inclined planar
+    faces falling away from the hole and a curved boss beside it (not with --procedural-features)."""
     points: int = 1024
     """Points per sample after sampling (fixed N)."""
     seed: int = 0
@@ -118,6 +121,8 @@ def file_attrs(args: CollectArgs, task) -> dict:
         "config": json.dumps({k: str(v) for k, v in dataclasses.asdict(args).items()}),
         "task_config": json.dumps(dataclasses.asdict(task)),
     }
+    if args.procedural and args.procedural_parts:
+        attrs["procedural_parts"] = True  # only when set: older files still resume
     if args.kind == "kovis" and tuple(args.rollout_step) != ROLLOUT_STEP:
         # Only when not the default, so files collected before the option still resume.
         attrs["rollout_step"] = json.dumps(list(args.rollout_step))
@@ -143,6 +148,7 @@ class Collector:
                 task.clearance,
                 task.hole_depth,
                 args.procedural_features,
+                args.procedural_parts,
             )
             self.assets.append(str(folder))
             groups = [names[i : i + GROUP_SIZE] for i in range(0, len(names), GROUP_SIZE)]

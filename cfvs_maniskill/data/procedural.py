@@ -135,16 +135,100 @@ def _featured_body(rng: np.random.Generator, peg: str, clearance: float, folder:
     return {"mesh": {"file": f"{name}.stl"}}, frame
 
 
+PART_HEIGHT = (0.1, 0.26)
+"""Height of a `parts` body: real parts put the opening well above the 5-12 cm of the
+primitives (the fandisk CAD part's is 13-22 cm above the table)."""
+PART_SLOPE_DEG = (15.0, 65.0)
+"""Inclination of a `parts` body's planar cuts from the horizontal."""
+
+
+def _part_body(rng: np.random.Generator, peg: str, clearance: float, folder: Path, name: str):
+    """A tall primitive cut like a machined part: the hole on what is left of the top face,
+    one to three inclined planar faces falling away from it (a chamfer, a sloped flank,
+    a ridge), and a curved boss (a lying cylinder or a ball) beside or below it. (the body
+    entry of a mesh spec, hole_frame)."""
+    base_body = _random_body(rng)
+    key = next(iter(base_body))
+    h = round(float(rng.uniform(*PART_HEIGHT)), 4)
+    if key == "box":
+        base_body["box"]["size"][2] = h
+    else:
+        base_body[key]["height"] = h
+    base = _primitive_mesh(base_body)
+    half = hole_half_extent(peg, clearance)
+    keep = half * np.sqrt(2) + MIN_WALL  # the opening's corner plus a wall
+    room = max(0.0, _inner_radius(base_body) - keep)
+    hole = rng.uniform(-1, 1, size=2) * room * 0.8 / np.sqrt(2)
+    mesh = base
+    for _ in range(int(rng.integers(1, 4))):
+        # A half-space whose boundary meets the top face `gap` beyond the opening and
+        # falls away from it at `slope`: everything above it goes.
+        side = rng.uniform(0, 2 * np.pi)
+        u = np.array([np.cos(side), np.sin(side), 0.0])
+        slope = np.radians(rng.uniform(*PART_SLOPE_DEG))
+        gap = rng.uniform(0.004, 0.05)
+        n = np.array([u[0] * np.sin(slope), u[1] * np.sin(slope), np.cos(slope)])
+        p = np.array([hole[0], hole[1], h]) + u * (keep + gap)
+        # A 1 m cube whose bottom face lies on the plane.
+        cut = trimesh.creation.box([1.0, 1.0, 1.0], transform=_at(0, 0, 0.5))
+        z = np.array([0.0, 0.0, 1.0])
+        cut.apply_transform(trimesh.geometry.align_vectors(z, n))
+        cut.apply_translation(p)
+        trimmed = trimesh.boolean.difference([mesh, cut], engine="manifold")
+        if trimmed.volume > 0.3 * base.volume:
+            mesh = trimmed
+    if rng.random() < 0.7:
+        # A curved boss beside the hole, its top below the opening (it must not hide it).
+        side = rng.uniform(0, 2 * np.pi)
+        u = np.array([np.cos(side), np.sin(side)])
+        r = rng.uniform(0.02, 0.07)
+        top = h - rng.uniform(0.01, 0.08)
+        c = hole + u * (keep + rng.uniform(0.01, 0.05) + r)
+        zc = max(top - r, r * 0.3)
+        if rng.random() < 0.5:
+            boss = trimesh.creation.icosphere(subdivisions=3, radius=r)
+        else:
+            boss = trimesh.creation.cylinder(r, rng.uniform(0.04, 0.16), 48)
+            boss.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+            boss.apply_transform(
+                trimesh.transformations.rotation_matrix(side + np.pi / 2, [0, 0, 1])
+            )
+        boss.apply_translation([c[0], c[1], zc])
+        mesh = trimesh.boolean.union([mesh, boss], engine="manifold")
+        floor = trimesh.creation.box([1.0, 1.0, 1.0], transform=_at(0, 0, -0.5))
+        mesh = trimesh.boolean.difference([mesh, floor], engine="manifold")  # flat bottom
+    mesh.export(folder / f"{name}.stl")
+    frame = {
+        "origin": [round(float(hole[0]), 5), round(float(hole[1]), 5), round(h, 5)],
+        "axis": [0.0, 0.0, 1.0],
+    }
+    return {"mesh": {"file": f"{name}.stl"}}, frame
+
+
+FAMILIES = {"plain": "", "features": "f", "parts": "p"}
+"""Procedural body families and their file-name tags."""
+
+
 def procedural_specs(
-    count: int, seed: int, peg: str, clearance: float, depth: float, features: bool = False
+    count: int,
+    seed: int,
+    peg: str,
+    clearance: float,
+    depth: float,
+    features: bool = False,
+    parts: bool = False,
 ) -> tuple[Path, list[str]]:
     """Write (once) `count` valid training bodies for `peg`; return their folder and names.
-    `features`: mesh bodies with a raised block and / or a notch beside the hole."""
-    tag = "-features" if features else ""
+    `features`: mesh bodies with a raised block and / or a notch beside the hole. `parts`:
+    tall bodies with inclined planar cuts and a curved boss around the hole (`_part_body`)."""
+    if features and parts:
+        raise ValueError("procedural bodies: choose one of features and parts, not both")
+    family = "parts" if parts else "features" if features else "plain"
+    tag = f"-{family}" if family != "plain" else ""
     folder = (
         cache_dir().parent / "procedural" / f"{peg}-c{clearance:g}-d{depth:g}-s{seed}-n{count}{tag}"
     )
-    names = [f"proc{'f' if features else ''}_{seed}_{i:04d}" for i in range(count)]
+    names = [f"proc{FAMILIES[family]}_{seed}_{i:04d}" for i in range(count)]
     if all((folder / f"{n}.yaml").is_file() for n in names):
         return folder, names
     folder.mkdir(parents=True, exist_ok=True)
@@ -152,8 +236,9 @@ def procedural_specs(
     for name in names:
         path = folder / f"{name}.yaml"
         for _ in range(200):
-            if features:
-                drawn = _featured_body(rng, peg, clearance, folder, name)
+            if features or parts:
+                make = _part_body if parts else _featured_body
+                drawn = make(rng, peg, clearance, folder, name)
                 if drawn is None:
                     continue
                 body, frame = drawn

@@ -76,6 +76,8 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs_ideal_data": _cfvs(
         "cfvs_ideal_data", weights="ideal_data", rim_plane=False, tol_translation=0.0015
     ),
+    # The coarse network before it was trained on part-like bodies (agents/cfvs/README.md).
+    "cfvs_oakn_plain": _cfvs("cfvs_oakn_plain", weights="oakn_plain"),
     # The paper's baselines (Table II).
     "icp": _icp("workspace"),
     "icp_kpts": _icp("oakn"),

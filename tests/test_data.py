@@ -125,24 +125,34 @@ def test_procedural_bodies_are_valid_training_objects(tmp_path, monkeypatch):
     assert {s.name for s in lib.select(["test"])}.isdisjoint(names)
 
 
-def test_featured_procedural_bodies_put_a_block_or_notch_beside_the_hole(tmp_path, monkeypatch):
-    """`--procedural-features`: mesh bodies whose top is not one flat face around the hole
-    (a raised block or a notch within a few cm of the rim), every one a valid, buildable
-    training object, the same files for the same seed."""
+def _mesh_bodies(count: int, seed: int, peg: str, **family):
+    """Write `count` procedural mesh bodies of a family (4 mm clearance, 45 mm deep), check
+    each is a valid, buildable training object with a hole frame: (folder, names,
+    [(spec, mesh)])."""
     import trimesh
 
     from cfvs_maniskill.objects.build import build_geometry
 
-    monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
-    folder, names = procedural_specs(6, 5, "round", 0.004, 0.045, features=True)
+    folder, names = procedural_specs(count, seed, peg, 0.004, 0.045, **family)
     lib = load_library([folder])
     assert not lib.errors
-    shown = 0
+    built = []
     for n in names:
         spec = lib.specs[n]
         assert spec.split == "train" and spec.body_kind == "mesh" and spec.hole_frame
-        build_geometry(spec, "round", 0.004, 0.045)  # room for the hole, collision parts
-        body = trimesh.load(folder / spec.body["file"])
+        build_geometry(spec, peg, 0.004, 0.045)  # room for the hole, collision parts
+        built.append((spec, trimesh.load(folder / spec.body["file"])))
+    return folder, names, built
+
+
+def test_featured_procedural_bodies_put_a_block_or_notch_beside_the_hole(tmp_path, monkeypatch):
+    """`--procedural-features`: mesh bodies whose top is not one flat face around the hole
+    (a raised block or a notch within a few cm of the rim), every one a valid, buildable
+    training object, the same files for the same seed."""
+    monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
+    shown = 0
+    folder, names, built = _mesh_bodies(6, 5, "round", features=True)
+    for spec, body in built:
         top, z = spec.hole_frame[0][2], body.vertices[:, 2]
         raised = z.max() > top + 0.005
         stepped = ((z > 0.001) & (z < top - 0.005)).any()
@@ -163,21 +173,11 @@ def test_part_like_procedural_bodies_are_tall_with_inclined_faces_around_the_hol
     """`--procedural-parts`: bodies 10-26 cm tall whose opening sits on what is left of the
     top face, with inclined planar faces (neither flat nor vertical) falling away from it,
     every one a valid, buildable training object."""
-    import trimesh
-
     from cfvs_maniskill.data.procedural import PART_HEIGHT
-    from cfvs_maniskill.objects.build import build_geometry
 
     monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
-    folder, names = procedural_specs(4, 7, "square", 0.004, 0.045, parts=True)
-    lib = load_library([folder])
-    assert not lib.errors
     inclined = 0
-    for n in names:
-        spec = lib.specs[n]
-        assert spec.split == "train" and spec.body_kind == "mesh" and spec.hole_frame
-        build_geometry(spec, "square", 0.004, 0.045)
-        body = trimesh.load(folder / spec.body["file"])
+    for spec, body in _mesh_bodies(4, 7, "square", parts=True)[2]:
         top = spec.hole_frame[0][2]
         assert PART_HEIGHT[0] <= top <= PART_HEIGHT[1] + 1e-6
         assert body.bounds[1, 2] == pytest.approx(top, abs=1e-6)  # nothing above the opening

@@ -27,12 +27,12 @@ def quaternion(R: np.ndarray) -> tuple[float, float, float, float]:
         (d * a + e * b + f * c, d * d + e * e + f * f, d * g + e * h + f * i),
         (g * a + h * b + i * c, g * d + h * e + i * f, g * g + h * h + i * i),
     )
+    if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) <= 0:
+        raise ValueError(f"not a rotation (determinant <= 0): {M.tolist()}")  # as SciPy
     # numpy.isclose(gram, eye, atol=1e-12) with its default rtol, as SciPy checks it
     if any(
         abs(gram[r][k] - (r == k)) > 1e-12 + 1e-5 * (r == k) for r in range(3) for k in range(3)
     ):
-        if np.linalg.det(M) <= 0:
-            raise ValueError(f"not a rotation (determinant <= 0): {M.tolist()}")
         U, _, Vt = np.linalg.svd(M, full_matrices=False)
         (a, b, c), (d, e, f), (g, h, i) = (U @ Vt).tolist()
     t = a + e + i

@@ -38,5 +38,6 @@ def test_quaternion_is_scipys_to_the_last_bit():
 
 
 def test_quaternion_refuses_a_reflection():
-    with pytest.raises(ValueError, match="determinant"):
-        G.quaternion(np.diag([1.0, 1.0, -1.0]) * 1.001)
+    for reflection in (np.diag([1.0, 1.0, -1.0]), np.diag([1.0, 1.0, -1.0]) * 1.001):
+        with pytest.raises(ValueError, match="determinant"):
+            G.quaternion(reflection)

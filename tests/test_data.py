@@ -187,6 +187,12 @@ def test_part_like_procedural_bodies_are_tall_with_inclined_faces_around_the_hol
     assert inclined >= 3, f"only {inclined} of 4 bodies have an inclined face"
     with pytest.raises(ValueError, match="features and parts"):
         procedural_specs(4, 7, "square", 0.004, 0.045, features=True, parts=True)
+    both = CollectArgs(
+        procedural=True, procedural_features=True, procedural_parts=True, out=tmp_path / "x.h5"
+    )
+    with pytest.raises(DatasetError, match="--procedural-parts: expected one body family"):
+        collect(both)
+    assert not (tmp_path / "x.h5").exists()
 
 
 @pytest.mark.slow

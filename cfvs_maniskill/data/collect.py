@@ -88,8 +88,8 @@ class CollectArgs:
     """With --procedural: mesh bodies with a raised block (wall, step, boss) and / or a notch
     (edge, inner corner) beside a hole placed anywhere its walls allow."""
     procedural_parts: bool = False
-    """With --procedural: tall bodies (10-26 cm) cut like machined parts: inclined planar
-    faces falling away from the hole and a curved boss beside it (not with --procedural-features)."""
+    """With --procedural: tall bodies (10-26 cm) cut like machined parts, inclined planar
+    faces falling away from the hole, a curved boss beside it (not with the features)."""
     points: int = 1024
     """Points per sample after sampling (fixed N)."""
     seed: int = 0
@@ -382,6 +382,10 @@ def collect(args: CollectArgs) -> int:
     task = tasks[args.task]
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    if args.procedural_features and args.procedural_parts:
+        raise store.DatasetError(
+            "--procedural-features / --procedural-parts: expected one body family, got both"
+        )
     if args.kind == "kovis" and not 0 < args.rollout_step[0] <= args.rollout_step[1] <= 0.1:
         raise store.DatasetError(
             f"--rollout-step: expected 0 < MIN <= MAX <= 0.1 m, got {args.rollout_step}"

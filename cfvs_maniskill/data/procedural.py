@@ -127,6 +127,12 @@ def _featured_body(rng: np.random.Generator, peg: str, clearance: float, folder:
         mesh = trimesh.boolean.difference([mesh, *cuts], engine="manifold")
         if len(parts) == 1 and mesh.volume > base.volume - 1e-7:
             return None  # the notch missed the body: it would be a plain primitive
+    return _write_mesh_body(mesh, hole, top, folder, name)
+
+
+def _write_mesh_body(mesh: trimesh.Trimesh, hole: np.ndarray, top: float, folder: Path, name: str):
+    """Export a drawn body as `name`.stl: (its mesh spec entry, the hole frame of an opening
+    at `hole` (x, y) on the face at height `top`, axis up)."""
     mesh.export(folder / f"{name}.stl")
     frame = {
         "origin": [round(float(hole[0]), 5), round(float(hole[1]), 5), round(top, 5)],
@@ -197,16 +203,13 @@ def _part_body(rng: np.random.Generator, peg: str, clearance: float, folder: Pat
         mesh = trimesh.boolean.union([mesh, boss], engine="manifold")
         floor = trimesh.creation.box([1.0, 1.0, 1.0], transform=_at(0, 0, -0.5))
         mesh = trimesh.boolean.difference([mesh, floor], engine="manifold")  # flat bottom
-    mesh.export(folder / f"{name}.stl")
-    frame = {
-        "origin": [round(float(hole[0]), 5), round(float(hole[1]), 5), round(h, 5)],
-        "axis": [0.0, 0.0, 1.0],
-    }
-    return {"mesh": {"file": f"{name}.stl"}}, frame
+    return _write_mesh_body(mesh, hole, h, folder, name)
 
 
 FAMILIES = {"plain": "", "features": "f", "parts": "p"}
 """Procedural body families and their file-name tags."""
+MESH_FAMILIES = {"features": _featured_body, "parts": _part_body}
+"""The families drawn as meshes, by the function that draws one (None: no body this draw)."""
 
 
 def procedural_specs(
@@ -236,9 +239,8 @@ def procedural_specs(
     for name in names:
         path = folder / f"{name}.yaml"
         for _ in range(200):
-            if features or parts:
-                make = _part_body if parts else _featured_body
-                drawn = make(rng, peg, clearance, folder, name)
+            if family in MESH_FAMILIES:
+                drawn = MESH_FAMILIES[family](rng, peg, clearance, folder, name)
                 if drawn is None:
                     continue
                 body, frame = drawn

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, weights_for
+from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, CFVSConfig, weights_for
 from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.episode import run_episode
@@ -116,7 +116,6 @@ def test_ablation_weights_are_chosen_by_how_they_were_trained():
 
 
 def test_missing_weights_name_the_file(make_env, tmp_path):
-    from cfvs_maniskill.agents.cfvs import CFVSConfig
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
     with pytest.raises(WeightsError, match=r"square/oakn.pt: weights file not found"):
@@ -178,3 +177,54 @@ def test_same_seed_same_cfvs_episodes_across_processes(tmp_path):
     for a, b in zip(*rows, strict=True):
         a.pop("wall_time_s"), b.pop("wall_time_s")
         assert a == b
+
+
+def test_fine_step_moves_on_one_vote_far_from_the_pose_and_averages_all_near_it(make_env):
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
+    agent = CFVSAgent(TaskSpec.of(env.unwrapped.task))
+    calls: list[int] = []
+    votes = iter([])
+
+    def fake_votes(pts, count):
+        calls.append(count)
+        return np.array([next(votes) for _ in range(count)], dtype=np.float64)
+
+    agent._votes = fake_votes
+    pts = np.zeros((100, 3), np.float32)
+    far = [0.0, 0.0, 0.01, 0.0, 0.0, 0.0]  # 1 cm: beyond the 3 mm gate
+    votes = iter([far])
+    assert np.allclose(agent.predict_offset(pts), far) and calls == [1]
+    calls.clear()
+    votes = iter([[0.0005, 0, 0, 0, 0, 0], [0.0015, 0, 0, 0, 0, 0], [0.0010, 0, 0, 0, 0, 0]])
+    got = agent.predict_offset(pts)
+    assert calls == [1, 2] and np.isclose(got[0], 0.001), got
+    # vote_gate 0: every step averages all votes, in one batch after the first.
+    agent.cfg.vote_gate = 0.0
+    calls.clear()
+    votes = iter([far, far, far])
+    agent.predict_offset(pts)
+    assert calls == [1, 2]
+
+
+@pytest.mark.parametrize("final_correction", [True, False])
+def test_small_offset_is_moved_by_once_then_inserted(make_env, final_correction):
+    from cfvs_maniskill.agents.base import Observation
+
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
+    obs, _ = env.reset(seed=3)
+    cfg = CFVSConfig(rim_plane=False, final_correction=final_correction)
+    agent = CFVSAgent(TaskSpec.of(env.unwrapped.task), cfg)
+    agent.reset(0)
+    agent.stage = "fine"
+    small = np.array([0.0004, -0.0003, 0.0, 0.0, 0.0, 0.001])  # below e_t and e_r
+    checks: list[int] = []
+    agent.predict_offset = lambda pts: checks.append(1) or small.copy()
+    tcp = env.unwrapped.tcp_matrix()
+    a = agent.act(Observation(obs, tcp))
+    if not final_correction:  # the paper's Algorithm 2: insert from here
+        assert a.kind == "insert" and len(checks) == 1
+        return
+    assert a.kind == "move" and agent.phase.startswith("final correction")
+    assert np.allclose(a.pose, L.apply_action(tcp, small))
+    # The next decision inserts without looking again.
+    assert agent.act(Observation(obs, a.pose)).kind == "insert" and len(checks) == 1

@@ -80,6 +80,10 @@ class CFVSConfig:
     """6-DoF: take the hole's axis from the face around the opening (perception/rim.py)
     instead of OPN's tilt; OPN still gives where the hole is. False: the paper's fine
     stage (the `cfvs_no_rim` ablation)."""
+    rim_parallel_planes: bool = True
+    """Check the face's least-median plane against a fit of the ring's parallel planar
+    patches (perception/rim.py) and take the latter where they disagree: beside a rib or a
+    step the face may hold under half the ring. False: the least-median plane alone."""
     weights_dir: Path = WEIGHTS_DIR
 
 
@@ -183,7 +187,14 @@ class CFVSAgent(Agent):
         reach = hole_half_extent(self.peg, self.task.clearance)
         if self.peg == "square":
             reach *= np.sqrt(2)  # the opening's corner
-        n = rim_normal(tool_to_world(pts, tcp), H[:3, 3], H[:3, 2], reach, self.rng)
+        n = rim_normal(
+            tool_to_world(pts, tcp),
+            H[:3, 3],
+            H[:3, 2],
+            reach,
+            self.rng,
+            parallel_planes=self.cfg.rim_parallel_planes,
+        )
         if n is None:
             return a, False
         pose = insertion_pose(self.peg, align_axis(H, n), -PRE_INSERT_HEIGHT, T)

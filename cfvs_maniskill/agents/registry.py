@@ -73,6 +73,8 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs_aug": _cfvs("cfvs_aug", augmentation=True, rim_plane=False, **EARLIER_FINE_LOOP),
     # The fine stage as the paper has it: OPN's own tilt, not the face around the opening.
     "cfvs_no_rim": _cfvs("cfvs_no_rim", rim_plane=False),
+    # The face's plane by least median of squares alone, without the parallel-planes check.
+    "cfvs_no_parallel": _cfvs("cfvs_no_parallel", rim_parallel_planes=False),
     # The networks before the sensor-mixed OPN and the part-trained OAKN (the fine stage
     # trained on the ideal sensor's clouds only, the coarse one on plain bodies), with the
     # fine loop's stop of then (e_t 1.5 mm): what training on the sensors' noise and on

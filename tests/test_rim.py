@@ -10,8 +10,11 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill.perception.rim import (
     MAX_TURN_DEG,
+    RING_MARGIN,
+    RING_WIDTH,
     _hypotheses,
     _least_median,
+    _ring,
     align_axis,
     parallel_planes_normal,
     rim_normal,
@@ -130,3 +133,22 @@ def test_the_parallel_planes_fit_shares_one_normal_across_levels_and_skips_walls
     n = parallel_planes_normal(local @ R.T, guess, rng)
     assert n is not None and np.degrees(np.arccos(n @ normal)) < 1.0
     assert parallel_planes_normal(local[:40] @ R.T, guess, rng) is None  # too few points
+
+
+def test_a_square_openings_ring_follows_its_sides_and_falls_back_beyond_its_corners():
+    rng = np.random.default_rng(5)
+    z = np.array([0.0, 0.0, 1.0])
+    plane = np.column_stack([rng.uniform(-0.08, 0.08, (20000, 2)), np.zeros(20000)])
+    half = 0.025  # a 50 mm square opening along x and y
+    ring = _ring(plane, np.zeros(3), z, half + RING_MARGIN, square_x=np.array([1.0, 0.0, 0.0]))
+    cheb = np.max(np.abs(ring[:, :2]), axis=1)
+    assert cheb.min() > half + RING_MARGIN and cheb.max() < half + RING_MARGIN + RING_WIDTH
+    # Next to a side, where a round ring beyond the corners (39 mm) never looks.
+    assert np.any(np.hypot(ring[:, 0], ring[:, 1]) < half * np.sqrt(2))
+    # Only the face beyond the square ring in view (as when the peg hides the rest):
+    # the round ring beyond the corners still finds it.
+    far = plane[(np.max(np.abs(plane[:, :2]), axis=1) > 0.05) & (np.hypot(*plane[:, :2].T) < 0.07)]
+    far[:, 2] = rng.normal(0, 0.0005, len(far))
+    guess = np.array([np.sin(np.radians(6)), 0.0, np.cos(np.radians(6))])
+    n = rim_normal(far, np.zeros(3), guess, half, rng, square_x=np.array([1.0, 0.0, 0.0]))
+    assert n is not None and np.degrees(np.arccos(n @ z)) < 1.0

@@ -84,6 +84,10 @@ class CFVSConfig:
     """Check the face's least-median plane against a fit of the ring's parallel planar
     patches (perception/rim.py) and take the latter where they disagree: beside a rib or a
     step the face may hold under half the ring. False: the least-median plane alone."""
+    rim_square_ring: bool = True
+    """Square holes: the ring follows the opening's sides (from OPN's yaw), starting 4 mm
+    outside them. False: a round ring beyond the opening's corners, which on a 50 mm hole
+    starts 39 mm out and falls off a small face (a boss, a hub) onto whatever is beyond."""
     weights_dir: Path = WEIGHTS_DIR
 
 
@@ -185,8 +189,11 @@ class CFVSAgent(Agent):
         T = L.apply_action(tcp, a)
         H = L.hole_frame_from_pre_insertion(T)
         reach = hole_half_extent(self.peg, self.task.clearance)
-        if self.peg == "square":
-            reach *= np.sqrt(2)  # the opening's corner
+        square_x = None
+        if self.peg == "square" and self.cfg.rim_square_ring:
+            square_x = H[:3, 0]  # the ring follows the opening's sides
+        elif self.peg == "square":
+            reach *= np.sqrt(2)  # a round ring beyond the opening's corners
         n = rim_normal(
             tool_to_world(pts, tcp),
             H[:3, 3],
@@ -194,6 +201,7 @@ class CFVSAgent(Agent):
             reach,
             self.rng,
             parallel_planes=self.cfg.rim_parallel_planes,
+            square_x=square_x,
         )
         if n is None:
             return a, False

@@ -55,24 +55,39 @@ def rim_normal(
     opening_radius: float,
     rng: np.random.Generator,
     parallel_planes: bool = True,
+    square_x: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """Unit normal (on `axis`'s side) of the face around the opening estimated at `centre`
     with axis `axis` (out of the hole), from `points` (n, 3, same frame); None when the
     ring holds too few points or its best plane is not the face.
 
-    `opening_radius`: the opening's farthest point from its centre (the hole's half width,
-    times sqrt(2) for a square hole). `parallel_planes`: check the least-median plane
-    against the parallel-planes fit and take the latter where they disagree by more than
-    PARALLEL_DISAGREE_DEG (False: the least-median plane alone, as before)."""
+    `opening_radius`: how far the opening reaches from its centre: a round hole's radius,
+    a square hole's corner (its half width times sqrt(2)), or, with `square_x` (the square
+    opening's x axis), its half width: the ring then follows the square's sides, so it
+    starts next to the opening along them instead of beyond its corners. `parallel_planes`:
+    check the least-median plane against the parallel-planes fit and take the latter where
+    they disagree by more than PARALLEL_DISAGREE_DEG (False: the least-median plane alone)."""
     axis = axis / np.linalg.norm(axis)
-    n = _two_passes(points, centre, axis, opening_radius, rng, _plane_normal)
+    n = _face_normal(points, centre, axis, opening_radius, rng, parallel_planes, square_x)
+    if n is None and square_x is not None:
+        # Too little of the face beside the sides is in view (the peg hides it from the
+        # wrist camera, or it ends there): the round ring beyond the corners.
+        n = _face_normal(points, centre, axis, opening_radius * np.sqrt(2), rng, parallel_planes)
+    return n
+
+
+def _face_normal(points, centre, axis, reach, rng, parallel_planes, square_x=None):
+    """rim_normal on one ring: the least-median plane, checked by the parallel planes."""
+
+    def ring(normal: np.ndarray) -> np.ndarray:
+        return _ring(points, centre, normal, reach + RING_MARGIN, square_x)
+
+    n = _two_passes(ring, axis, rng, _plane_normal)
     if parallel_planes:
         # One pass to check (the fits agree nearly always), the second only to replace.
-        ring = _ring(points, centre, axis, opening_radius + RING_MARGIN)
-        p = parallel_planes_normal(ring, axis, rng)
+        p = parallel_planes_normal(ring(axis), axis, rng)
         if p is not None and (n is None or _angle_deg(n, p) > PARALLEL_DISAGREE_DEG):
-            ring = _ring(points, centre, p, opening_radius + RING_MARGIN)
-            n = parallel_planes_normal(ring, p, rng)
+            n = parallel_planes_normal(ring(p), p, rng)
             n = p if n is None else n
     if n is None or _angle_deg(n, axis) > MAX_TURN_DEG:
         return None
@@ -83,7 +98,7 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
 
 
-def _two_passes(points, centre, axis, opening_radius, rng, fit_normal) -> np.ndarray | None:
+def _two_passes(ring, axis, rng, fit_normal) -> np.ndarray | None:
     """`fit_normal` on the ring around `axis`, then again on the ring cut square to the
     normal found. A ring cut across a tilted face keeps, at its edges, only the points
     whose noise moves them inwards, and that truncation tilts the fit back towards the
@@ -91,19 +106,32 @@ def _two_passes(points, centre, axis, opening_radius, rng, fit_normal) -> np.nda
     second pass)."""
     n, guess = None, axis
     for _ in range(2):
-        fit = fit_normal(_ring(points, centre, guess, opening_radius + RING_MARGIN), guess, rng)
+        fit = fit_normal(ring(guess), guess, rng)
         if fit is None:
             break
         n = guess = fit
     return n
 
 
-def _ring(points: np.ndarray, centre: np.ndarray, axis: np.ndarray, inner: float) -> np.ndarray:
-    """The points RING_WIDTH wide outside radius `inner` around the axis, near its plane."""
+def _ring(
+    points: np.ndarray,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    inner: float,
+    square_x: np.ndarray | None = None,
+) -> np.ndarray:
+    """The points RING_WIDTH wide outside `inner` around the axis, near its plane: outside
+    a circle of that radius, or with `square_x` a square of that half width."""
     d = points - centre
     h = d @ axis
-    radial = np.linalg.norm(d - np.outer(h, axis), axis=1)
-    return points[(radial > inner) & (radial < inner + RING_WIDTH) & (np.abs(h) < RING_BAND)]
+    across = d - np.outer(h, axis)
+    if square_x is None:
+        dist = np.linalg.norm(across, axis=1)
+    else:
+        ex = square_x - (square_x @ axis) * axis
+        ex /= np.linalg.norm(ex)
+        dist = np.maximum(np.abs(across @ ex), np.abs(across @ np.cross(axis, ex)))
+    return points[(dist > inner) & (dist < inner + RING_WIDTH) & (np.abs(h) < RING_BAND)]
 
 
 def _plane_normal(ring: np.ndarray, axis: np.ndarray, rng: np.random.Generator):

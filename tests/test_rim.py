@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from cfvs_maniskill.perception import rim
 from cfvs_maniskill.perception.rim import (
     MAX_TURN_DEG,
     RING_MARGIN,
@@ -98,11 +99,13 @@ def test_the_pruned_least_median_picks_what_every_median_picks_bit_for_bit():
         assert med_best == med[best] and np.array_equal(residual, every[best]), trial
 
 
-def test_parallel_planes_find_the_face_where_it_is_a_minority_of_the_ring():
+def test_parallel_planes_find_the_face_where_it_is_a_minority_of_the_ring(monkeypatch):
     """A real 6-DoF wrist view of a disc with two ribs 12.5 mm from a 50 mm square hole
     (ideal sensor): the peg hides most of the face, so the ring holds more rib (its top
     21 mm above the face, its walls) than face. The least-median plane runs through the
-    face and the rib tops at ~13 deg; the parallel-planes check finds the face's normal."""
+    face and the rib tops at ~13 deg; the parallel-planes check finds the face's normal.
+    (The ring of the recording: round, 10 mm band; the default band is wider now.)"""
+    monkeypatch.setattr(rim, "RING_BAND", 0.010)
     view = np.load(Path(__file__).parent / "data" / "ribbed_disc_view.npz")
     pts = view["points"].astype(np.float64)
     args = (view["centre"], view["axis"], float(view["opening_radius"]))
@@ -152,3 +155,23 @@ def test_a_square_openings_ring_follows_its_sides_and_falls_back_beyond_its_corn
     guess = np.array([np.sin(np.radians(6)), 0.0, np.cos(np.radians(6))])
     n = rim_normal(far, np.zeros(3), guess, half, rng, square_x=np.array([1.0, 0.0, 0.0]))
     assert n is not None and np.degrees(np.arccos(n @ z)) < 1.0
+
+
+def test_the_face_is_found_when_the_opening_is_estimated_2_cm_too_low():
+    """The top of a 5 cm-radius pipe around a 50 mm square opening, with the opening's
+    estimate 18 mm below it (as OPN put it on a flanged pipe): the ring's band reaches it."""
+    rng = np.random.default_rng(7)
+    xy = rng.uniform(-0.05, 0.05, (8000, 2))
+    xy = xy[(np.hypot(*xy.T) < 0.05) & (np.max(np.abs(xy), axis=1) > 0.026)]
+    top = np.column_stack([xy, rng.normal(0.018, 0.0005, len(xy))])
+    a = rng.uniform(0, 2 * np.pi, 1500)
+    side = np.column_stack([0.05 * np.cos(a), 0.05 * np.sin(a), rng.uniform(-0.07, 0.018, 1500)])
+    n = rim_normal(
+        np.vstack([top, side]),
+        np.zeros(3),
+        np.array([0.0, 0.0, 1.0]),
+        0.025,
+        rng,
+        square_x=np.array([1.0, 0.0, 0.0]),
+    )
+    assert n is not None and np.degrees(np.arccos(n[2])) < 0.2  # 0.35-2.4 deg at 10 mm

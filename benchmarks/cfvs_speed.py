@@ -86,7 +86,8 @@ def measure(args: Args) -> tuple[list[Figure], str]:
         f"{args.threads} torch thread): {ok}/{args.episodes} success, mean wall "
         f"{wall / args.episodes:.2f} s, mean simulated servo time {np.mean(servo):.2f} s, "
         f"{physics.calls / args.episodes:.0f} control steps per episode. The networks' share"
-        " is mostly OPN: 3 votes (one batch of 3 clouds, ~27 ms) per fine step.",
+        " is mostly OPN: one prediction per fine step far from the pose (vote_gate), three"
+        " near it (the first, then a batch of two).",
         "",
         "| share of the episode wall time | seconds / episode | % |",
         "|---|---|---|",

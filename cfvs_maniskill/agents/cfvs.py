@@ -69,8 +69,8 @@ class CFVSConfig:
     """A fine step first runs one vote; when it asks for a move longer than this (metres),
     the peg moves on it alone: far from the pose one vote's error (~1 mm) is small against
     the move and the next step corrects it. Nearer, the other `fine_votes - 1` run too and
-    all are averaged, so the step that decides to stop sees the full average. 0: always
-    all votes (what the paper's single prediction per step is closest to)."""
+    all are averaged, so the step that decides to stop sees the full average. 0: every
+    step averages all votes (the loop before session 16)."""
     final_correction: bool = True
     """When the offset is below (e_t, e_r), move by it once more, then insert (no new
     observation: it is the move Algorithm 2's next iteration would start with). False: the

@@ -9,7 +9,9 @@ rib, an edge's side face), so the plane is fitted by least median of squares: no
 threshold to tune per sensor, right while the face holds more than half the ring's points.
 Where it does not (ribs or a step beside the opening, the peg hiding the face near it),
 surfaces parallel to the face (a rib's top) still share its normal: a second fit votes the
-orientation of the ring's planar patches and takes over where the two disagree.
+orientation of the ring's planar patches and takes over where the two disagree. For a
+square opening the ring follows its sides (nearest the opening, where a small face such as
+a boss's top still is), and falls back to a round ring beyond its corners.
 """
 
 from __future__ import annotations
@@ -18,16 +20,17 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 RING_MARGIN = 0.004
-"""The ring starts this far outside the opening's farthest point (its corner for a square
-hole): beyond the chamfer and a few millimetres of error in the estimated centre."""
+"""The ring starts this far outside the opening (its sides, or for the round ring its
+farthest point): beyond the chamfer and a few millimetres of error in the estimated
+centre."""
 RING_WIDTH = 0.020
 """... and is this wide."""
 RING_BAND = 0.025
 """Only points within this distance of the estimated opening's plane: the face, not the
 floor under an edge. Wide, because OPN's estimate of the opening's height can be 1-2 cm
 off on bodies unlike its training ones (on a flanged pipe 9 cm tall it put the opening
-14-20 mm too low, and a 10 mm band then held no face at all: 4 of 20 inserted, 15 of 20
-at 25 mm); the tops of raised blocks and ribs that a wide band takes in are parallel to
+14-20 mm too low, and a 10 mm band then held no face at all: 4 of 20 inserted in 6-DoF,
+20 of 20 at 25 mm; a hexagonal boss 7 -> 19); the tops of raised blocks and ribs that a wide band takes in are parallel to
 the face, which the parallel-planes check handles, and walls are outliers to both fits."""
 MIN_RING_POINTS = 60
 HYPOTHESES = 200
@@ -80,7 +83,15 @@ def rim_normal(
     return n
 
 
-def _face_normal(points, centre, axis, reach, rng, parallel_planes, square_x=None):
+def _face_normal(
+    points: np.ndarray,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    reach: float,
+    rng: np.random.Generator,
+    parallel_planes: bool,
+    square_x: np.ndarray | None = None,
+) -> np.ndarray | None:
     """rim_normal on one ring: the least-median plane, checked by the parallel planes."""
 
     def ring(normal: np.ndarray) -> np.ndarray:
@@ -102,7 +113,7 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
 
 
-def _two_passes(ring, axis, rng, fit_normal) -> np.ndarray | None:
+def _two_passes(ring, axis: np.ndarray, rng: np.random.Generator, fit_normal) -> np.ndarray | None:
     """`fit_normal` on the ring around `axis`, then again on the ring cut square to the
     normal found. A ring cut across a tilted face keeps, at its edges, only the points
     whose noise moves them inwards, and that truncation tilts the fit back towards the

@@ -97,10 +97,11 @@ def _face_normal(
     def ring(normal: np.ndarray) -> np.ndarray:
         return _ring(points, centre, normal, reach + RING_MARGIN, square_x)
 
-    n = _two_passes(ring, axis, rng, _plane_normal)
+    around_axis = ring(axis)  # both fits start from it
+    n = _two_passes(ring, around_axis, axis, rng)
     if parallel_planes:
         # One pass to check (the fits agree nearly always), the second only to replace.
-        p = parallel_planes_normal(ring(axis), axis, rng)
+        p = parallel_planes_normal(around_axis, axis, rng)
         if p is not None and (n is None or _angle_deg(n, p) > PARALLEL_DISAGREE_DEG):
             n = parallel_planes_normal(ring(p), p, rng)
             n = p if n is None else n
@@ -113,19 +114,17 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
 
 
-def _two_passes(ring, axis: np.ndarray, rng: np.random.Generator, fit_normal) -> np.ndarray | None:
-    """`fit_normal` on the ring around `axis`, then again on the ring cut square to the
-    normal found. A ring cut across a tilted face keeps, at its edges, only the points
-    whose noise moves them inwards, and that truncation tilts the fit back towards the
-    guess (measured: 1.2 deg at 2 mm noise and a 12 deg wrong guess; 0.2 deg after the
-    second pass)."""
-    n, guess = None, axis
-    for _ in range(2):
-        fit = fit_normal(ring(guess), guess, rng)
-        if fit is None:
-            break
-        n = guess = fit
-    return n
+def _two_passes(ring, first: np.ndarray, axis: np.ndarray, rng: np.random.Generator):
+    """The least-median normal of `first` (the ring around `axis`), refitted on the ring
+    cut square to the normal found (`ring(normal)`); None when the first fit finds none. A
+    ring cut across a tilted face keeps, at its edges, only the points whose noise moves
+    them inwards, and that truncation tilts the fit back towards the guess (measured:
+    1.2 deg at 2 mm noise and a 12 deg wrong guess; 0.2 deg after the second pass)."""
+    n = _plane_normal(first, axis, rng)
+    if n is None:
+        return None
+    again = _plane_normal(ring(n), n, rng)
+    return n if again is None else again
 
 
 def _ring(

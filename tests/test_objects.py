@@ -134,3 +134,48 @@ def test_huge_mesh_is_simplified_with_a_warning_and_cached(tmp_path, caplog, mon
     again = build_geometry(lib.specs["scan"], "round")  # from the cache: no second pass
     assert time.perf_counter() - t < 5 and not caplog.records
     assert np.array_equal(again.visual_faces, g.visual_faces)
+
+
+@pytest.mark.parametrize(("profile", "clearance"), [("square", 0.0005), ("round", 0.001)])
+def test_a_concave_bodys_hole_wall_has_no_seam_and_no_part_in_the_clearance(
+    tmp_path, profile, clearance
+):
+    """A boss on a plate: CoACD used to cut the hole wall where the boss meets the plate,
+    and a peg sliding down a 0.25 mm gap caught on the lower part's edge there. The wall
+    must be one convex part per wedge from the floor to the opening, and no part may
+    reach into the hole beyond a round wall's facet sagitta (clearance / 8, probed at / 6:
+    the probe is a polygon too)."""
+    import trimesh
+
+    plate = trimesh.creation.box([0.20, 0.16, 0.03])
+    plate.apply_translation([0, 0, 0.015])
+    boss = trimesh.creation.cylinder(0.045, 0.032, sections=64)
+    boss.apply_translation([0.02, 0, 0.044])
+    trimesh.boolean.union([plate, boss], engine="manifold").export(tmp_path / "boss.stl")
+    (tmp_path / "boss.yaml").write_text(
+        "split: test\nbody:\n  mesh: {file: boss.stl}\n"
+        "hole_frame: {origin: [0.02, 0.0, 0.06], axis: [0.0, 0.0, 1.0]}\n"
+    )
+    lib = load_library([tmp_path], include_default=False)
+    assert not lib.errors
+    g = build_geometry(lib.specs["boss"], profile, clearance=clearance, use_cache=False)
+    x, y, z_top = g.hole_frame
+    half = g.hole_half_extent
+    bottom = z_top - DEFAULT_HOLE_DEPTH
+    heights = set()
+    for v, _ in g.collision_parts:
+        d = v[:, :2] - np.array([x, y])
+        r = np.abs(d).max(axis=1) if profile == "square" else np.linalg.norm(d, axis=1)
+        on_wall = v[np.abs(r - half) < 5e-5]
+        heights |= {round(float(z) - bottom, 4) for z in on_wall[:, 2]}
+    assert heights, "no part lines the hole wall"
+    inner = sorted(h for h in heights if 0.0005 < h < DEFAULT_HOLE_DEPTH - 0.0005)
+    assert not inner, f"the wall has seams at {inner} m above the hole's floor"
+    probe = hole_solid(profile, half - clearance / 6, bottom + 1e-4, z_top + 0.05, (x, y))
+    for v, _ in g.collision_parts:
+        hull = mf.Manifold.hull_points(np.asarray(v, np.float32))
+        assert (hull ^ probe).volume() < 1e-12
+    hull_vol = sum(
+        mf.Manifold.hull_points(np.asarray(v, np.float32)).volume() for v, _ in g.collision_parts
+    )
+    assert hull_vol == pytest.approx(g.visual_trimesh().volume, rel=0.02)

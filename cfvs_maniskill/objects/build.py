@@ -41,7 +41,7 @@ from cfvs_maniskill.objects.spec import HoleSpec, HoleSpecError
 
 log = logging.getLogger(__name__)
 
-BUILD_VERSION = 3
+BUILD_VERSION = 4
 """Bump when the geometry code changes, so stale cache entries are not reused."""
 CYLINDER_SEGMENTS = 96
 """Facets of round bodies and round holes: 1.6 um chord error on a 25 mm hole."""
@@ -425,58 +425,113 @@ def hole_sectors(profile: str, half: float, clearance: float) -> np.ndarray:
 
 
 def _pieces(cut: mf.Manifold, origin: np.ndarray, depth: float, angles: np.ndarray):
-    """The floor slab under the hole, and the body around the hole cut into wedges."""
+    """The floor slab under the hole, and the body around the hole cut into wedges: yields
+    (piece, outward unit vector of the wedge's middle in x y), the vector None for the slab."""
     # Split 10 um above the hole's floor: a split exactly at the floor leaves zero-thickness
     # slivers of it in the wedges, whose hulls would then reach the hole's axis.
     z_bottom = float(origin[2] - depth) + 1e-5
     upper = cut.trim_by_plane([0, 0, 1], z_bottom)
-    yield cut.trim_by_plane([0, 0, -1], -z_bottom)
+    yield cut.trim_by_plane([0, 0, -1], -z_bottom), None
     c = origin[:2]
     for a, b in zip(angles, np.roll(angles, -1), strict=True):
         n_a = np.array([-np.sin(a), np.cos(a)])  # keeps the side counter-clockwise of ray a
         n_b = np.array([np.sin(b), -np.cos(b)])  # keeps the side clockwise of ray b
         w = upper.trim_by_plane([*n_a, 0], float(n_a @ c)).trim_by_plane([*n_b, 0], float(n_b @ c))
-        yield w
+        mid = a + ((b - a) % (2 * np.pi)) / 2
+        yield w, np.array([np.cos(mid), np.sin(mid)])
+
+
+def lining_depth(profile: str, half: float, angles: np.ndarray) -> float:
+    """How far from the hole's axis, along a wedge's middle, its lining ends: MIN_WALL
+    outside the wall, where check_room guarantees solid material all round (for a round
+    hole, the plane that stays inside the hole grown by MIN_WALL across the wedge)."""
+    if profile == "square":
+        return half + MIN_WALL
+    return (half + MIN_WALL) * float(np.cos(np.pi / len(angles)))
+
+
+def _split_lining(piece: mf.Manifold, origin, outward: np.ndarray, reach: float):
+    """A wedge as (lining, rest): the part within `reach` of the hole's axis along the wedge's
+    middle (the hole wall and the material just behind it), and the part beyond."""
+    n = np.array([*outward, 0.0])
+    d = float(n[:2] @ origin[:2]) + reach
+    return piece.trim_by_plane((-n).tolist(), -d), piece.trim_by_plane(n.tolist(), d)
 
 
 def convex_decomposition(cut: mf.Manifold, origin, profile, half, clearance, depth, source: Path):
-    """CoACD on each wedge of the cut body; wedges keep every hull out of the hole.
+    """Convex parts of the cut body: every hull kept out of the hole, its walls seamless.
 
     Plain CoACD on a whole body with a round hole took 60-130 s and gave 200-400 parts (its
     concavity threshold cannot tell a hole wall from the rest). Cut into wedges, a primitive
     body needs no CoACD at all (each wedge is its own hull) and a mesh body is fast.
+
+    A concave wedge (a boss on a plate, a step) is first split into its lining, the wall and
+    MIN_WALL of material behind it over the hole's whole depth, which is one convex part,
+    and the rest, which CoACD decomposes. Given the whole wedge, CoACD cut the wall where the
+    boss met the plate; a peg sliding down a 0.25 mm gap caught its lower edge on the
+    lower part's top edge there (PhysX's internal-edge contacts): at 0.5 mm clearance 11 of
+    40 CFVS episodes on a boss plate and a chamfered hub stopped 1.7 mm (the peg's chamfer)
+    below that seam, 13 of 20 on a stepped boss below one of its two seams.
     """
     import coacd
 
     coacd.set_log_level("error")
+    angles = hole_sectors(profile, half, clearance)
+    reach = lining_depth(profile, half, angles)
+    column = hole_solid(profile, half, origin[2] - depth - 1.0, origin[2] + 1.0, origin[:2])
     parts: list[tuple[np.ndarray, np.ndarray]] = []
-    for piece in _pieces(cut, origin, depth, hole_sectors(profile, half, clearance)):
-        if piece.is_empty() or piece.volume() < 1e-10:
+    for piece, outward in _pieces(cut, origin, depth, angles):
+        if _empty(piece):
             continue
-        v, f = _from_manifold(piece)
-        hull = piece.hull()
-        # A wedge of a convex body is convex up to the arc of the hole wall: its hull is
-        # the decomposition. CoACD is only run on pieces that are really concave.
-        if hull.volume() <= piece.volume() * 1.01:
-            got = [_from_manifold(hull)]
-            if not parts_in_hole(got, origin, profile, half, depth):
-                parts += got
-                continue
-        mesh = coacd.Mesh(v.astype(np.float64), f.astype(np.int64))
-        for threshold in COACD_THRESHOLDS:
-            raw = coacd.run_coacd(mesh, threshold=threshold, preprocess_mode="off", seed=0)
-            got = [(np.asarray(pv, np.float32), np.asarray(pf, np.int32)) for pv, pf in raw]
-            if not parts_in_hole(got, origin, profile, half, depth):
-                parts += got
-                break
-        else:
-            raise HoleSpecError(
-                source,
-                "body",
-                "the convex decomposition keeps reaching into the hole even at CoACD "
-                f"threshold {COACD_THRESHOLDS[-1]}; simplify the body around the hole",
-            )
+        hull = _hull_if_convex(piece)
+        if hull is not None and not parts_in_hole([hull], origin, profile, half, depth):
+            parts.append(hull)
+            continue
+        rest = [piece]
+        if outward is not None:
+            lining, beyond = _split_lining(piece, origin, outward, reach)
+            lined = _hull_if_convex(lining, allowed=column)
+            if lined is not None and not parts_in_hole([lined], origin, profile, half, depth):
+                parts.append(lined)
+                rest = [] if _empty(beyond) else [beyond]
+        for p in rest:
+            parts += _coacd_parts(p, origin, profile, half, depth, source, coacd)
     return parts
+
+
+def _empty(piece: mf.Manifold) -> bool:
+    return piece.is_empty() or piece.volume() < 1e-10
+
+
+def _hull_if_convex(piece: mf.Manifold, allowed: mf.Manifold | None = None):
+    """The piece's hull as (vertices, faces) if it adds under 1% to the piece's volume
+    (outside `allowed`: the hole, where a round wall's facets leave their sagitta), else
+    None. A wedge of a convex body is convex up to the arc of the hole wall."""
+    if _empty(piece):
+        return None
+    hull = piece.hull()
+    added = (
+        hull.volume() - piece.volume() if allowed is None else ((hull - piece) - allowed).volume()
+    )
+    return _from_manifold(hull) if added <= 0.01 * piece.volume() else None
+
+
+def _coacd_parts(piece: mf.Manifold, origin, profile, half, depth, source: Path, coacd):
+    """CoACD's parts of a concave piece, at the first threshold that keeps them out of the
+    hole."""
+    v, f = _from_manifold(piece)
+    mesh = coacd.Mesh(v.astype(np.float64), f.astype(np.int64))
+    for threshold in COACD_THRESHOLDS:
+        raw = coacd.run_coacd(mesh, threshold=threshold, preprocess_mode="off", seed=0)
+        got = [(np.asarray(pv, np.float32), np.asarray(pf, np.int32)) for pv, pf in raw]
+        if not parts_in_hole(got, origin, profile, half, depth):
+            return got
+    raise HoleSpecError(
+        source,
+        "body",
+        "the convex decomposition keeps reaching into the hole even at CoACD "
+        f"threshold {COACD_THRESHOLDS[-1]}; simplify the body around the hole",
+    )
 
 
 # --------------------------------------------------------------------------------------------

@@ -40,6 +40,7 @@ from cfvs_maniskill.perception.clouds import (
     sample_fixed,
     tool_to_world,
 )
+from cfvs_maniskill.perception.opening import fit_opening
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
 from cfvs_maniskill.task_dof import constrain
 
@@ -88,6 +89,11 @@ class CFVSConfig:
     """Square holes: the ring follows the opening's sides (from OPN's yaw), starting 4 mm
     outside them. False: a round ring beyond the opening's corners, which on a 50 mm hole
     starts 39 mm out and falls off a small face (a boss, a hub) onto whatever is beyond."""
+    opening_fit: bool = True
+    """6-DoF square holes, with `rim_plane`: move the estimate in the face's plane and turn
+    it about its axis onto the opening the wrist cloud shows, from the face's edge and the
+    walls in view (perception/opening.py; the hole's size is the task's nominal one).
+    False: OPN's position and yaw (the agent before session 17). Round holes keep OPN's."""
     weights_dir: Path = WEIGHTS_DIR
 
 
@@ -134,6 +140,7 @@ class CFVSAgent(Agent):
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
+        self.opening_seen = False
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
@@ -185,17 +192,19 @@ class CFVSAgent(Agent):
         self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray
     ) -> tuple[np.ndarray, bool]:
         """OPN's offset `a` with the hole's axis replaced by the normal of the face around
-        the opening it points at, and True; (a, False) when the ring gives no face."""
+        the opening it points at (and, with `opening_fit`, its centre and a square's yaw by
+        the opening seen on that face), and True; (a, False) when the ring gives no face."""
         T = L.apply_action(tcp, a)
         H = L.hole_frame_from_pre_insertion(T)
-        reach = hole_half_extent(self.peg, self.task.clearance)
-        square_x = None
+        world = tool_to_world(pts, tcp)
+        half = hole_half_extent(self.peg, self.task.clearance)
+        reach, square_x = half, None
         if self.peg == "square" and self.cfg.rim_square_ring:
             square_x = H[:3, 0]  # the ring follows the opening's sides
         elif self.peg == "square":
             reach *= np.sqrt(2)  # a round ring beyond the opening's corners
         n = rim_normal(
-            tool_to_world(pts, tcp),
+            world,
             H[:3, 3],
             H[:3, 2],
             reach,
@@ -203,9 +212,15 @@ class CFVSAgent(Agent):
             parallel_planes=self.cfg.rim_parallel_planes,
             square_x=square_x,
         )
+        self.opening_seen = False
         if n is None:
             return a, False
-        pose = insertion_pose(self.peg, align_axis(H, n), -PRE_INSERT_HEIGHT, T)
+        H = align_axis(H, n)
+        if self.cfg.opening_fit and self.peg == "square":
+            seen = fit_opening(world, H, half)
+            self.opening_seen = seen is not None
+            H = H if seen is None else seen
+        pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
         return L.fine_action(tcp, pose), True
 
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
@@ -231,7 +246,10 @@ class CFVSAgent(Agent):
             source = "OPN offset"
             if self.task.dof == 6 and self.cfg.rim_plane:
                 a, on_rim = self.axis_from_rim(a, pts, tcp)
-                source = "OPN position, axis from the rim" if on_rim else source
+                if on_rim:
+                    source = "axis from the rim, " + (
+                        "centre from the opening" if self.opening_seen else "OPN position"
+                    )
             if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
                 a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
             small = (

@@ -6,9 +6,10 @@ centre of the hole's opening on the top face, axes parallel to the body's: +z po
 the hole, the bottom of the hole is at z = -depth. The square hole's sides are parallel to
 the body's x and y axes.
 
-The hole is cut with manifold3d (exact, watertight booleans). The collision shape is CoACD's
-convex decomposition of the cut body, checked so that no part reaches into the hole; both
-are cached on disk under a hash of everything that changes the geometry, so a cached load
+The hole is cut with manifold3d (exact, watertight booleans). The collision shape is a
+convex decomposition of the cut body in wedges around the hole (`convex_decomposition`):
+no part reaches into the hole and its wall has no seam between its floor and its opening;
+both are cached on disk under a hash of everything that changes the geometry, so a cached load
 takes milliseconds.
 """
 

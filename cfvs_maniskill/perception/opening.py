@@ -1,0 +1,215 @@
+"""Where a square opening is on its face: its centre and yaw from the wrist cloud.
+
+At the pre-insertion pose the wrist camera sees the face round the opening, the far wall
+of the hole below it and the tops of the two side walls; the peg hides the hole's inside
+and, from the camera, the face at the near edge. The opening's size is known (the task's
+nominal peg plus clearance). CFVS's fine network infers the hole's position from the whole
+crop, and beside raised blocks, ribs or a pocket's walls on bodies unlike its training
+ones leaves it 1-3 mm and 1-3 deg (yaw) off, which a 0.5 mm clearance does not forgive.
+
+Here (in the estimated hole frame, the axis from the rim fit): the face's level is the
+densest flat part of a ring just outside the opening (so the band that counts as face
+follows the sensor's noise); each side is where the face begins (the half-density point
+of the face's points across the side: noise blurs an edge evenly both ways), or, where
+the camera sees that side's wall, the wall's own points (noise lifts a seen wall's top
+into the face's band, inside the edge). The centre is midway between two opposite sides
+of the same kind; on the axis the camera looks along, where only the far wall is seen (a
+face edge opposite it is the peg's shadow), it is the nominal half width from that wall,
+less how much narrower than nominal the two side walls look (measured in the same view:
+the simulated camera puts walls ~0.6 mm inside, and a real one has its own error). The
+yaw is the walls' mean slope. Measured on 42 wrist views of the 0.5 mm task (ideal sensor,
+test and held-out objects): lateral error p50 / p90 1.26 / 2.61 -> 0.35 / 0.86 mm, yaw
+0.83 / 2.02 -> 0.34 / 0.63 deg (docs/cfvs.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+LEVEL_BAND = (0.001, 0.006)
+"""The face's level is measured on the points this far outside the estimated opening's
+sides: the face right at the edge, not what stands beside it (a rib 1 cm away)."""
+SEARCH = 0.008
+"""A side is looked for up to this far either side of the estimated one (OPN's error
+beside features, 1-6 mm)."""
+MAX_NOISE = 0.002
+"""No fit when the face's measured noise (robust sigma along its normal) is above this:
+edges are then blurred over several millimetres. Measured on wrist views of the face at
+the pre-insertion pose: ideal sensor 0.9-1.9 mm, realistic 0.1-0.6 mm, i.i.d. 3 mm
+2.9-9.4 mm, where the fit's lateral error was 2.2 mm (p50) against the network's 0.9."""
+MIN_DEPTH_BAND = 0.0015
+"""Points within max(this, 4 robust sigmas of the face's noise) of the face's level are
+the face; below is the hole, above other surfaces."""
+EDGE_BIN = 0.0005
+"""A side's edge: the face's point density in bins this wide across it ..."""
+EDGE_RUN = 3
+"""... the first run of this many bins at half the density further out."""
+MIN_EDGE_POINTS = 3
+"""A side with fewer face points per bin than this (at its plateau) is not used."""
+WALL_DEPTH = 0.04
+"""The wall: points down to this far below the face (not the hole's floor) ..."""
+WALL_NEAR = 0.003
+"""... within this of the face's edge on that side ..."""
+MIN_WALL_POINTS = 20
+"""... at least this many of them, else the wall is out of the camera's view."""
+CORNER = 0.003
+"""Points this close to a corner along a side are left out (the corner belongs to both)."""
+MAX_SHIFT = 0.006
+"""A fit moving the centre further than this from the estimate is taken for something
+else's edge, and not used."""
+MAX_TURN_DEG = 6.0
+"""... or turning the square further than this."""
+WIDTH_TOLERANCE = (-0.001, 0.004)
+"""Two opposite sides are used only when they are 2 x half this far from the opening's
+nominal width apart (a chamfered or worn edge is wider; nearer is something else)."""
+
+
+def fit_opening(
+    points: np.ndarray, frame: np.ndarray, half: float, iterations: int = 2
+) -> np.ndarray | None:
+    """The hole frame `frame` (4x4: origin at the estimated square opening, z out of the
+    hole along the face's normal, x along a side) moved in the face's plane and turned
+    about its z onto the opening seen in `points` (n, 3, same frame as `frame`); None when
+    the face and walls round it are not seen well enough, or the fit moves it further than
+    MAX_SHIFT / MAX_TURN_DEG. `half`: the opening's nominal half width."""
+    H = frame.copy()
+    for _ in range(iterations):
+        step = _fit_once(points, H, half)
+        if step is None:
+            return None
+        H = step
+    shift = H[:3, 3] - frame[:3, 3]
+    turn = np.degrees(np.arccos(np.clip(H[:3, 0] @ frame[:3, 0], -1.0, 1.0)))
+    if np.linalg.norm(shift) > MAX_SHIFT or turn > MAX_TURN_DEG:
+        return None
+    return H
+
+
+def _fit_once(points: np.ndarray, H: np.ndarray, half: float) -> np.ndarray | None:
+    q = (points - H[:3, 3]) @ H[:3, :3]  # the estimate's frame: x, y in the face, z out
+    r = np.abs(q[:, :2]).max(axis=1)
+    near = (r > half + LEVEL_BAND[0]) & (r < half + LEVEL_BAND[1])
+    if np.count_nonzero(near) < 30:
+        return None
+    level, spread = face_level(q[near, 2])
+    if spread > MAX_NOISE:
+        return None
+    band = max(MIN_DEPTH_BAND, 4.0 * spread)
+    face = q[(np.abs(q[:, 2] - level) < band) & (r < half + SEARCH)]
+    wall = q[(q[:, 2] < level - band) & (q[:, 2] > level - WALL_DEPTH) & (r < half + SEARCH)]
+    fit = _square(face, wall, half)
+    if fit is None:
+        return None
+    (cx, cy), yaw = fit
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = H.copy()
+    out[:3, :2] = H[:3, :2] @ np.array([[c, -s], [s, c]])
+    out[:3, 3] = H[:3, 3] + H[:3, 0] * cx + H[:3, 1] * cy
+    return out
+
+
+def face_level(h: np.ndarray) -> tuple[float, float]:
+    """(level, noise sigma) of the face among heights `h` along the axis: the densest
+    millimetre, then the median and the robust spread of the points within a window that
+    grows to 3 sigmas. Beside the opening the ring also holds fins' and ribs' tops and,
+    where the estimate is off, the hole's wall; the face is the flat, dense part."""
+    counts, edges = np.histogram(h, bins=max(1, int(np.ptp(h) / 0.001) + 1))
+    i = int(np.argmax(counts))
+    level, window = (edges[i] + edges[i + 1]) / 2, 0.003
+    sigma = 0.0
+    for _ in range(3):
+        near = h[np.abs(h - level) < window]
+        level = float(np.median(near))
+        sigma = 1.4826 * float(np.median(np.abs(near - level)))
+        window = max(0.003, 3.0 * sigma)
+    return level, sigma
+
+
+def edge_crossing(inward: np.ndarray, half: float) -> float | None:
+    """Where the face begins along one side's inward distances `inward` (its points within
+    SEARCH of the nominal edge): the first bin from the axis at which the face's point
+    density reaches half its plateau and stays there, refined by that bin's fill. Noise
+    blurs the edge evenly both ways, so the half-density point is the edge itself."""
+    w = inward - half
+    counts, lo = np.histogram(w, bins=int(round(2 * SEARCH / EDGE_BIN)), range=(-SEARCH, SEARCH))
+    plateau = float(np.percentile(counts, 75))
+    if plateau < MIN_EDGE_POINTS:
+        return None
+    full = counts >= plateau / 2
+    # From the axis outwards, the first run of EDGE_RUN bins all at half the plateau.
+    runs = np.convolve(full.astype(int), np.ones(EDGE_RUN, int), "valid") == EDGE_RUN
+    if not runs.any():
+        return None
+    i = int(np.argmax(runs))
+    fill = min(1.0, counts[i] / plateau)
+    return half + float(lo[i]) + EDGE_BIN * (1.0 - fill)
+
+
+def _square(face: np.ndarray, wall: np.ndarray, half: float):
+    """((cx, cy), yaw) of a square opening from the face points `face` and the points below
+    the face `wall` (its frame), or None."""
+    centre = [0.0, 0.0]
+    slopes, weights = [], []
+    sides = {}
+    for axis in (0, 1):
+        other = 1 - axis
+        for sign in (1.0, -1.0):
+            u = sign * face[:, axis]  # inward distance along this side's normal...
+            v = face[:, other]  # ... and position along the side
+            on = (u > half - SEARCH) & (np.abs(v) < half - CORNER)
+            edge = edge_crossing(u[on], half)
+            # Where the camera sees this side's wall, noise lifts the wall's top into the
+            # face's band, inside the edge: the wall's own points say where it is.
+            wu, wv = sign * wall[:, axis], wall[:, other]
+            ref = half if edge is None else edge
+            seen = (np.abs(wv) < half - CORNER) & (np.abs(wu - ref) < WALL_NEAR)
+            is_wall = np.count_nonzero(seen) >= MIN_WALL_POINTS
+            if is_wall:
+                edge = float(np.median(wu[seen]))
+                slope = _line_slope(wv[seen], wu[seen])
+                # The side's normal turned by yaw: its inward distance changes along the
+                # side by -sign * tan(yaw) for the x sides, +sign * tan(yaw) for the y sides.
+                slopes.append(np.arctan(slope) * (-sign if axis == 0 else sign))
+                weights.append(np.count_nonzero(seen))
+            if edge is not None:
+                sides[axis, sign] = (edge, is_wall)
+    if not sides:
+        return None
+    # How much narrower the walls look than the nominal opening, from an axis with both
+    # walls in view (the cloud's own error at walls, the same on every wall).
+    narrowing = [
+        half - (sides[a, 1.0][0] + sides[a, -1.0][0]) / 2
+        for a in (0, 1)
+        if (a, 1.0) in sides and (a, -1.0) in sides and sides[a, 1.0][1] and sides[a, -1.0][1]
+    ]
+    for axis in (0, 1):
+        plus, minus = sides.get((axis, 1.0)), sides.get((axis, -1.0))
+        # Both sides the same kind: a face edge beside a wall may be the edge of the peg's
+        # shadow (the near side, which the peg hides from the wrist camera).
+        if plus is not None and minus is not None and plus[1] == minus[1]:
+            width = plus[0] + minus[0]
+            if 2 * WIDTH_TOLERANCE[0] <= width - 2 * half <= 2 * WIDTH_TOLERANCE[1]:
+                centre[axis] = (plus[0] - minus[0]) / 2
+                continue
+        # One wall only (the peg hides the near side's edge from the wrist camera): the
+        # opening's nominal half width beyond it, less the narrowing measured across the
+        # other axis.
+        walls = [(sg, s[0]) for sg, s in ((1.0, plus), (-1.0, minus)) if s is not None and s[1]]
+        if len(walls) == 1 and narrowing:
+            sg, at = walls[0]
+            centre[axis] = sg * (at - (half - float(np.mean(narrowing))))
+    yaw = float(np.average(slopes, weights=weights)) if weights else 0.0
+    return (centre[0], centre[1]), yaw
+
+
+def _line_slope(x: np.ndarray, y: np.ndarray) -> float:
+    """dy/dx of a line through the points, by least squares refitted without the points
+    beyond 3 robust sigmas of the first fit (a corner's or a chamfer's)."""
+    keep = np.ones(len(x), bool)
+    slope = 0.0
+    for _ in range(2):
+        slope, icept = np.polyfit(x[keep], y[keep], 1)
+        res = y - (slope * x + icept)
+        sigma = 1.4826 * np.median(np.abs(res[keep])) + 1e-9
+        keep = np.abs(res) < 3 * sigma
+    return float(slope)

@@ -1,0 +1,109 @@
+"""The opening's centre and yaw from the face's inner edge (perception/opening.py): on
+synthetic faces with the peg's shadow at the near edge, and on recorded wrist views."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cfvs_maniskill.perception.opening import face_level, fit_opening
+
+HALF = 0.02325  # the 0.5 mm task's square hole
+DATA = Path(__file__).parent / "data"
+
+
+def _frame(yaw_deg: float = 0.0, at=(0.0, 0.0, 0.0)) -> np.ndarray:
+    a = np.radians(yaw_deg)
+    H = np.eye(4)
+    H[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    H[:3, 3] = at
+    return H
+
+
+def _view(rng, noise=0.001, shadow=0.004, rib=False):
+    """Points (hole frame = world) of a face around a square opening of half width HALF at
+    the origin, as the wrist camera sees it from the +x side: the face all round except a
+    shadow `shadow` wide beyond the +x edge (the peg), the far (-x) wall down to 40 mm,
+    the side walls' top 8 mm; optionally a rib 12 mm beside the +y edge, 20 mm tall."""
+    g = rng.uniform(-0.045, 0.045, size=(40000, 2))
+    cheb = np.abs(g).max(axis=1)
+    face = g[(cheb > HALF) & ~((g[:, 0] > HALF) & (g[:, 0] < HALF + shadow))]
+    pts = [np.column_stack([face, np.zeros(len(face))])]
+    far = rng.uniform([-HALF, -0.04], [HALF, 0.0], size=(1500, 2))
+    pts.append(np.column_stack([np.full(len(far), -HALF), far[:, 0], far[:, 1]]))
+    for s in (1.0, -1.0):
+        side = rng.uniform([-HALF, -0.008], [HALF, 0.0], size=(150, 2))
+        pts.append(np.column_stack([side[:, 0], np.full(len(side), s * HALF), side[:, 1]]))
+    if rib:
+        top = rng.uniform([-0.045, HALF + 0.012], [0.045, HALF + 0.027], size=(3000, 2))
+        pts.append(np.column_stack([top, np.full(len(top), 0.02)]))
+    p = np.vstack(pts)
+    return p + rng.normal(0.0, noise, p.shape)
+
+
+def _errors(F: np.ndarray) -> tuple[float, float]:
+    """(lateral mm, yaw deg modulo the square's 90) of a fitted frame from the true one."""
+    yaw = np.degrees(np.arctan2(F[1, 0], F[0, 0]))
+    return 1000 * float(np.linalg.norm(F[:2, 3])), abs(((yaw + 45) % 90) - 45)
+
+
+@pytest.mark.parametrize("rib", [False, True])
+def test_the_opening_is_found_from_a_wrong_estimate_despite_the_pegs_shadow(rib):
+    rng = np.random.default_rng(0)
+    pts = _view(rng, rib=rib)
+    for start in [(0.002, -0.0015, 0.004, 1.5), (-0.0025, 0.002, -0.006, -2.0)]:
+        F = fit_opening(pts, _frame(start[3], start[:3]), HALF)
+        assert F is not None
+        lateral, yaw = _errors(F)
+        # The shadow's edge is 4 mm beyond the true +x edge: taken for the opening's edge
+        # it would put the centre 2 mm off.
+        assert lateral < 0.3 and yaw < 0.3, (start, lateral, yaw)
+        assert F[:3, 2] @ [0, 0, 1] > 0.9999  # moved in the face's plane only
+
+
+def test_no_answer_without_a_face_round_the_estimate_or_through_heavy_noise():
+    rng = np.random.default_rng(1)
+    pts = _view(rng)
+    # 3 mm noise blurs the edges over centimetres: the network's estimate is kept.
+    assert fit_opening(_view(rng, noise=0.003), _frame(1.0, (0.001, 0.0, 0.0)), HALF) is None
+    assert fit_opening(pts, _frame(0.0, (0.2, 0.0, 0.0)), HALF) is None
+    assert fit_opening(pts[:20], _frame(), HALF) is None
+
+
+def test_the_face_level_is_the_dense_flat_part_not_a_rib_or_the_wall():
+    rng = np.random.default_rng(2)
+    h = np.concatenate(
+        [
+            rng.normal(0.0, 0.001, 600),  # the face
+            rng.uniform(-0.04, 0.0, 300),  # the wall, where the estimate is off
+            rng.normal(0.02, 0.001, 250),  # a rib's top
+        ]
+    )
+    level, sigma = face_level(h)
+    assert abs(level) < 0.0003 and 0.0007 < sigma < 0.0014
+
+
+@pytest.mark.parametrize(
+    "name", ["heldoutb_pocket_block_view_11.npz", "heldoutd_twin_boss_view_12.npz"]
+)
+def test_recorded_wrist_views_end_nearer_the_opening_than_the_fine_network(name):
+    """Real 6-DoF wrist views at the 0.5 mm task's insertion (ideal sensor; held-out pocket
+    block and twin boss): the fine network's estimate was 1.6 and 2.9 mm, 1.0 and 3.1 deg
+    off; the opening fit brings both within 0.8 mm and 0.8 deg (0.70 and 0.48 mm, 0.08 and
+    0.63 deg)."""
+    view = np.load(DATA / name)
+    H = view["true_hole"]
+    F = fit_opening(view["points"].astype(np.float64), view["estimate"], float(view["half"]))
+    assert F is not None
+
+    def errors(G):
+        z = H[:3, 2]
+        d = G[:3, 3] - H[:3, 3]
+        x = G[:3, 0] - (G[:3, 0] @ z) * z
+        yaw = np.degrees(np.arctan2(x @ H[:3, 1], x @ H[:3, 0]))
+        return 1000 * np.linalg.norm(d - (d @ z) * z), abs(((yaw + 45) % 90) - 45)
+
+    before, after = errors(view["estimate"]), errors(F)
+    assert before[0] > 1.5 and after[0] < 0.8 and after[1] < 0.8, (before, after)

@@ -73,6 +73,9 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs_aug": _cfvs("cfvs_aug", augmentation=True, rim_plane=False, **EARLIER_FINE_LOOP),
     # The fine stage as the paper has it: OPN's own tilt, not the face around the opening.
     "cfvs_no_rim": _cfvs("cfvs_no_rim", rim_plane=False),
+    # The estimate's position and yaw as OPN gives them, without the opening fit (the
+    # agent of session 16).
+    "cfvs_no_opening": _cfvs("cfvs_no_opening", opening_fit=False),
     # The face's plane by least median of squares alone, without the parallel-planes check.
     "cfvs_no_parallel": _cfvs("cfvs_no_parallel", rim_parallel_planes=False),
     # The networks before the sensor-mixed OPN and the part-trained OAKN (the fine stage

@@ -72,6 +72,9 @@ def fit_opening(
     about its z onto the opening seen in `points` (n, 3, same frame as `frame`); None when
     the face and walls round it are not seen well enough, or the fit moves it further than
     MAX_SHIFT / MAX_TURN_DEG. `half`: the opening's nominal half width."""
+    # Only what the fit can reach (the rest of the cloud is most of it).
+    q = (points - frame[:3, 3]) @ frame[:3, :2]
+    points = points[np.abs(q).max(axis=1) < half + SEARCH + MAX_SHIFT]
     H = frame.copy()
     for _ in range(iterations):
         step = _fit_once(points, H, half)
@@ -208,8 +211,10 @@ def _line_slope(x: np.ndarray, y: np.ndarray) -> float:
     keep = np.ones(len(x), bool)
     slope = 0.0
     for _ in range(2):
-        slope, icept = np.polyfit(x[keep], y[keep], 1)
-        res = y - (slope * x + icept)
+        xm, ym = x[keep].mean(), y[keep].mean()
+        dx = x[keep] - xm
+        slope = float(dx @ (y[keep] - ym) / max(float(dx @ dx), 1e-12))
+        res = y - ym - slope * (x - xm)
         sigma = 1.4826 * np.median(np.abs(res[keep])) + 1e-9
         keep = np.abs(res) < 3 * sigma
-    return float(slope)
+    return slope

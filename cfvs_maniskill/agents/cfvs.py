@@ -93,8 +93,7 @@ class CFVSConfig:
     """6-DoF square holes, with `rim_plane`: move the estimate in the face's plane and turn
     it about its axis onto the opening the wrist cloud shows, from the face's edge and the
     walls in view (perception/opening.py; the hole's size is the task's nominal one).
-    Only on steps within `vote_gate` (~3 ms a fit). False: OPN's position and yaw (the
-    agent before session 17). Round holes keep OPN's."""
+    False: OPN's position and yaw (the agent before session 17). Round holes keep OPN's."""
     weights_dir: Path = WEIGHTS_DIR
 
 
@@ -190,12 +189,11 @@ class CFVSAgent(Agent):
         return np.array([L.fine_action_from_keypoints(ki.numpy()) for ki in k], np.float64)
 
     def axis_from_rim(
-        self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray, opening: bool = True
+        self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray
     ) -> tuple[np.ndarray, bool]:
         """OPN's offset `a` with the hole's axis replaced by the normal of the face around
-        the opening it points at (and, with `opening` and `opening_fit`, its centre and a
-        square's yaw by the opening seen on that face), and True; (a, False) when the ring
-        gives no face."""
+        the opening it points at (and, with `opening_fit`, its centre and a square's yaw by
+        the opening seen on that face), and True; (a, False) when the ring gives no face."""
         T = L.apply_action(tcp, a)
         H = L.hole_frame_from_pre_insertion(T)
         world = tool_to_world(pts, tcp)
@@ -218,7 +216,7 @@ class CFVSAgent(Agent):
         if n is None:
             return a, False
         H = align_axis(H, n)
-        if opening and self.cfg.opening_fit and self.peg == "square":
+        if self.cfg.opening_fit and self.peg == "square":
             seen = fit_opening(world, H, half)
             self.opening_seen = seen is not None
             H = H if seen is None else seen
@@ -247,10 +245,7 @@ class CFVSAgent(Agent):
                 return Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"
             if self.task.dof == 6 and self.cfg.rim_plane:
-                # The opening fit only where the step is short (within the vote gate): a
-                # long step is corrected by the next one anyway.
-                near = self.cfg.vote_gate <= 0 or np.linalg.norm(a[:3]) <= self.cfg.vote_gate
-                a, on_rim = self.axis_from_rim(a, pts, tcp, opening=near)
+                a, on_rim = self.axis_from_rim(a, pts, tcp)
                 if on_rim:
                     source = "axis from the rim, " + (
                         "centre from the opening" if self.opening_seen else "OPN position"

@@ -152,8 +152,9 @@ def test_hole_at_and_hole_frame_together_are_refused(tmp_path):
 
 def test_cache_keys_of_files_without_hole_frame_are_unchanged():
     """Adding the field must not invalidate users' caches: the default objects' keys are
-    the ones the committed geometry was built under."""
+    the ones the committed geometry was built under (BUILD_VERSION 4, session 17: the
+    seamless hole walls; a version bump is the one thing meant to change them)."""
     from cfvs_maniskill.objects.build import geometry_key
 
     spec = load_library().specs["cuboid_test_1"]
-    assert geometry_key(spec, "square", 0.004, 0.045) == "bf50c59fc098474995c1"
+    assert geometry_key(spec, "square", 0.004, 0.045) == "ed65b40d0dd0f4703544"

@@ -255,8 +255,10 @@ def test_state_round_trip_across_episodes(make_env, obs_mode, api):
         assert "hole_pose" in obs["extra"]
 
 
-STRAY_PIXELS = 4
-"""Pixels allowed to differ beyond the rounding step away from any depth edge (of 16384)."""
+STRAY_PIXELS = 8
+"""Pixels allowed to differ beyond the rounding step away from any depth edge (of 16384):
+full-suite runs have shown 2 and (session 17) 5 such points where the same test alone
+passes with none; a wrong or missing hole moves thousands."""
 
 
 def assert_images_equal(a: np.ndarray, b: np.ndarray, what: str) -> None:

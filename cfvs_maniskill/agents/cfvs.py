@@ -7,7 +7,8 @@
    the offset is below (e_t, e_r) or `max_fine_iterations` is reached. In 6-DoF (beyond
    the paper, `rim_plane`) the offset's tilt is replaced by the normal of the face around
    the opening OPN points at (perception/rim.py): OPN gives where the hole is, the face
-   gives its axis.
+   gives its axis; for a square hole the opening seen on that face then gives its centre
+   and yaw (`opening_fit`, perception/opening.py), OPN's estimate the place to look.
 3. Insert along the tool axis (shared executor, force-bounded).
 
 Ablations of the paper's Table IV are switches: `coarse_to_fine=False` inserts right after

@@ -470,7 +470,7 @@ def convex_decomposition(cut: mf.Manifold, origin, profile, half, clearance, dep
     MIN_WALL of material behind it over the hole's whole depth, which is one convex part,
     and the rest, which CoACD decomposes. Given the whole wedge, CoACD cut the wall where the
     boss met the plate; a peg sliding down a 0.25 mm gap caught its lower edge on the
-    lower part's top edge there (PhysX's internal-edge contacts): at 0.5 mm clearance 11 of
+    lower part's top edge there (PhysX's internal-edge contacts): at 0.5 mm clearance 14 of
     40 CFVS episodes on a boss plate and a chamfered hub stopped 1.7 mm (the peg's chamfer)
     below that seam, 13 of 20 on a stepped boss below one of its two seams.
     """

@@ -19,7 +19,7 @@ less how much narrower than nominal the two side walls look (measured in the sam
 the simulated camera puts walls ~0.6 mm inside, and a real one has its own error). The
 yaw is the walls' mean slope. Measured on 42 wrist views of the 0.5 mm task (ideal sensor,
 test and held-out objects): lateral error p50 / p90 1.26 / 2.61 -> 0.35 / 0.86 mm, yaw
-0.83 / 2.02 -> 0.34 / 0.63 deg (docs/cfvs.md).
+0.83 / 2.02 -> 0.19 / 0.55 deg (docs/cfvs.md).
 """
 
 from __future__ import annotations

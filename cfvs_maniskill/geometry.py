@@ -69,6 +69,11 @@ def rot_angle(R: np.ndarray) -> float:
     return float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
 
 
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle between two unit vectors, degrees."""
+    return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
+
+
 def frame_with_z(z: np.ndarray, x_hint: np.ndarray) -> np.ndarray:
     """Rotation whose z axis is `z` and whose x axis is as close as possible to `x_hint`."""
     z = z / np.linalg.norm(z)

@@ -141,7 +141,6 @@ class CFVSAgent(Agent):
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
-        self.opening_seen = False
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
@@ -191,10 +190,11 @@ class CFVSAgent(Agent):
 
     def axis_from_rim(
         self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray
-    ) -> tuple[np.ndarray, bool]:
+    ) -> tuple[np.ndarray, str]:
         """OPN's offset `a` with the hole's axis replaced by the normal of the face around
         the opening it points at (and, with `opening_fit`, its centre and a square's yaw by
-        the opening seen on that face), and True; (a, False) when the ring gives no face."""
+        the opening seen on that face), and where the offset came from; (a, "OPN offset")
+        when the ring gives no face."""
         T = L.apply_action(tcp, a)
         H = L.hole_frame_from_pre_insertion(T)
         world = tool_to_world(pts, tcp)
@@ -213,16 +213,15 @@ class CFVSAgent(Agent):
             parallel_planes=self.cfg.rim_parallel_planes,
             square_x=square_x,
         )
-        self.opening_seen = False
         if n is None:
-            return a, False
+            return a, "OPN offset"
         H = align_axis(H, n)
+        seen = None
         if self.cfg.opening_fit and self.peg == "square":
             seen = fit_opening(world, H, half)
-            self.opening_seen = seen is not None
-            H = H if seen is None else seen
-        pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
-        return L.fine_action(tcp, pose), True
+        where = "OPN position" if seen is None else "centre from the opening"
+        pose = insertion_pose(self.peg, H if seen is None else seen, -PRE_INSERT_HEIGHT, T)
+        return L.fine_action(tcp, pose), f"axis from the rim, {where}"
 
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return constrain(self.task, T, ref)
@@ -246,11 +245,7 @@ class CFVSAgent(Agent):
                 return Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"
             if self.task.dof == 6 and self.cfg.rim_plane:
-                a, on_rim = self.axis_from_rim(a, pts, tcp)
-                if on_rim:
-                    source = "axis from the rim, " + (
-                        "centre from the opening" if self.opening_seen else "OPN position"
-                    )
+                a, source = self.axis_from_rim(a, pts, tcp)
             if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
                 a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
             small = (

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from cfvs_maniskill.geometry import angle_deg
+
 LEVEL_BAND = (0.001, 0.006)
 """The face's level is measured on the points this far outside the estimated opening's
 sides: the face right at the edge, not what stands beside it (a rib 1 cm away)."""
@@ -82,8 +84,7 @@ def fit_opening(
             return None
         H = step
     shift = H[:3, 3] - frame[:3, 3]
-    turn = np.degrees(np.arccos(np.clip(H[:3, 0] @ frame[:3, 0], -1.0, 1.0)))
-    if np.linalg.norm(shift) > MAX_SHIFT or turn > MAX_TURN_DEG:
+    if np.linalg.norm(shift) > MAX_SHIFT or angle_deg(H[:3, 0], frame[:3, 0]) > MAX_TURN_DEG:
         return None
     return H
 

@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from cfvs_maniskill.geometry import angle_deg
+
 RING_MARGIN = 0.004
 """The ring starts this far outside the opening (its sides, or for the round ring its
 farthest point): beyond the chamfer and a few millimetres of error in the estimated
@@ -102,16 +104,12 @@ def _face_normal(
     if parallel_planes:
         # One pass to check (the fits agree nearly always), the second only to replace.
         p = parallel_planes_normal(around_axis, axis, rng)
-        if p is not None and (n is None or _angle_deg(n, p) > PARALLEL_DISAGREE_DEG):
+        if p is not None and (n is None or angle_deg(n, p) > PARALLEL_DISAGREE_DEG):
             n = parallel_planes_normal(ring(p), p, rng)
             n = p if n is None else n
-    if n is None or _angle_deg(n, axis) > MAX_TURN_DEG:
+    if n is None or angle_deg(n, axis) > MAX_TURN_DEG:
         return None
     return n
-
-
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
 
 
 def _two_passes(ring, first: np.ndarray, axis: np.ndarray, rng: np.random.Generator):

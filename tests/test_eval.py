@@ -118,6 +118,29 @@ def test_bad_line_in_the_middle_is_named(tmp_path):
     assert "line 2" in r.stderr and "episodes.jsonl" in r.stderr
 
 
+def test_an_object_only_a_worker_finds_unusable_is_named_and_saved_episodes_stay(tmp_path):
+    # The file parses (so the runner starts), but its box is too thin for the hole: only
+    # the worker that builds the body finds out, in another process.
+    assets = tmp_path / "assets"
+    assets.mkdir()
+    (assets / "thin.yaml").write_text(
+        "name: thin_box\nsplit: test\nbody:\n  box: {size: [0.2, 0.2, 0.03]}\n"
+        "hole_frame:\n  origin: [0.0, 0.0, 0.03]\n  axis: [0.0, 0.0, 1.0]\n"
+    )
+    out = tmp_path / "out"
+    out.mkdir()
+    kept = '{"key": "earlier", "success": true}\n'
+    (out / "episodes.jsonl").write_text(kept)
+    r = run_cli(
+        "cfvs_maniskill.eval", "--assets", str(assets), "--objects", "thin_box",
+        "--tasks", "PegInsert3DoF", "--agents", "oracle", "--init-errors", "small",
+        "--episodes-per-object", "1", "--workers", "1", "--out", str(out),
+    )  # fmt: skip
+    assert r.returncode == 1, r.stderr[-2000:]
+    assert "thin.yaml" in r.stderr and "body.box.size" in r.stderr and "Traceback" not in r.stderr
+    assert (out / "episodes.jsonl").read_text() == kept
+
+
 @pytest.mark.parametrize(
     ("flag", "value", "valid"),
     [

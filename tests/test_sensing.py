@@ -3,6 +3,7 @@ hand-eye error, the wrist force/torque sensor, profile files and their errors.""
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -241,8 +242,10 @@ def test_shipped_profiles_load_and_cite_their_numbers():
 )
 def test_bad_profile_fields_are_named(tmp_path, sections, field):
     path = _profile_file(tmp_path, "bad", **sections)
-    with pytest.raises(SensorProfileError, match=f"bad.yaml: field '{field}'"):
+    with pytest.raises(SensorProfileError, match=f"bad.yaml: field '{field}'") as e:
         load_profile(str(path))
+    # eval workers raise it in another process: it must arrive with its message intact
+    assert str(pickle.loads(pickle.dumps(e.value))) == str(e.value)
 
 
 def test_unknown_sensor_exits_2_listing_the_profiles(tmp_path):

@@ -35,24 +35,24 @@ meshes = {
     # A round post 5 cm across and 12 cm tall, its side 5 cm from the hole's axis.
     "tall_post": body(
         [
-            box([0.20, 0.18, 0.04], transform=at([0, 0, 0.02])),
-            cylinder(0.025, 0.12, sections=64, transform=at([0, 0.075, 0.10])),
+            box([0.20, 0.18, 0.05], transform=at([0, 0, 0.025])),
+            cylinder(0.025, 0.12, sections=64, transform=at([0, 0.075, 0.11])),
         ]
     ),
     # A slot 12 cm wide between walls 8 cm tall; the hole on its floor.
     "deep_slot": body(
         [
-            box([0.22, 0.16, 0.045], transform=at([0, 0, 0.0225])),
-            box([0.22, 0.02, 0.08], transform=at([0, 0.07, 0.085])),
-            box([0.22, 0.02, 0.08], transform=at([0, -0.07, 0.085])),
+            box([0.22, 0.16, 0.05], transform=at([0, 0, 0.025])),
+            box([0.22, 0.02, 0.08], transform=at([0, 0.07, 0.09])),
+            box([0.22, 0.02, 0.08], transform=at([0, -0.07, 0.09])),
         ]
     ),
     # A 6 x 6 cm tower 11 cm tall off the hole's diagonal, its near corner 4 cm out on x
     # and 3.5 cm on y.
     "corner_tower": body(
         [
-            box([0.20, 0.20, 0.04], transform=at([0, 0, 0.02])),
-            box([0.06, 0.06, 0.11], transform=at([0.07, 0.065, 0.095])),
+            box([0.20, 0.20, 0.05], transform=at([0, 0, 0.025])),
+            box([0.06, 0.06, 0.11], transform=at([0.07, 0.065, 0.105])),
         ]
     ),
     # A ledge 1.5 cm high whose edge runs 1.2 cm beyond the opening on one side.

@@ -148,6 +148,7 @@ def main(args: EvalArgs) -> int:
     from cfvs_maniskill.eval.results import ResultsError, append, read_done
     from cfvs_maniskill.eval.summary import write_summary
     from cfvs_maniskill.eval.worker import WorkerConfig
+    from cfvs_maniskill.objects.spec import HoleSpecError
 
     objects = resolve(args)
     files = sensor_files(args.sensors)
@@ -190,9 +191,11 @@ def main(args: EvalArgs) -> int:
         bar.close()
         print(f"interrupted: {bar.n} episodes saved in {path}; run again to finish")
         return 130
-    except ResultsError as e:
+    except (ResultsError, HoleSpecError) as e:
+        # A hole object only a worker builds (its mesh) can turn out unusable mid-run:
+        # name it; the episodes already appended stay, and a rerun resumes after them.
         bar.close()
-        print(f"error: {e}", file=sys.stderr)
+        print(f"error: {e}; {bar.n} episodes saved in {path}", file=sys.stderr)
         return 1
     bar.close()
     wall = time.perf_counter() - t0

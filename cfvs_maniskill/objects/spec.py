@@ -60,6 +60,11 @@ class HoleSpecError(ValueError):
         self.message = message
         super().__init__(f"{self.file}: field '{field}': {message}")
 
+    def __reduce__(self):
+        # Raised in an eval worker process, it must survive the trip back to the parent
+        # intact (the default pickling calls __init__ with the message alone and fails).
+        return type(self), (self.file, self.field, self.message)
+
 
 @dataclass(frozen=True)
 class HoleSpec:

@@ -20,7 +20,11 @@ DEPTH_MODELS = ("iid", "stereo")
 
 class SensorProfileError(ValueError):
     def __init__(self, file: Path | str, field_name: str, message: str):
+        self.args_ = (str(file), field_name, message)
         super().__init__(f"{file}: field '{field_name}': {message}")
+
+    def __reduce__(self):  # picklable across worker processes, like HoleSpecError
+        return type(self), self.args_
 
 
 @dataclass(frozen=True)

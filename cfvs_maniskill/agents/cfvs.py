@@ -28,8 +28,9 @@ import numpy as np
 import torch
 import yaml
 
+from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
-from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
+from cfvs_maniskill.agents.interface import TaskSpec, camera_in_tcp, insertion_pose
 from cfvs_maniskill.constants import AGENTS_DIR, PRE_INSERT_HEIGHT, hole_half_extent
 from cfvs_maniskill.nets.checkpoint import load_weights
 from cfvs_maniskill.nets.oakn import weighted_keypoints
@@ -43,6 +44,7 @@ from cfvs_maniskill.perception.clouds import (
 )
 from cfvs_maniskill.perception.opening import fit_opening
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
+from cfvs_maniskill.perception.view import clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
 
 WEIGHTS_DIR = AGENTS_DIR / "cfvs"
@@ -95,6 +97,11 @@ class CFVSConfig:
     it about its axis onto the opening the wrist cloud shows, from the face's edge and the
     walls in view (perception/opening.py; the hole's size is the task's nominal one).
     False: OPN's position and yaw (the agent before session 17). Round holes keep OPN's."""
+    clear_view: bool = True
+    """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
+    nearest the tool's own whose camera has a clear line of sight to the opening from the
+    pre-insertion pose (perception/view.py; the coarse cloud says what stands over the
+    face). False: always the nearest (the agent before session 18)."""
     weights_dir: Path = WEIGHTS_DIR
 
 
@@ -151,9 +158,13 @@ class CFVSAgent(Agent):
 
     # ------------------------------------------------------------------ perception
     @torch.no_grad()
-    def estimate_hole(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
-        """OAKN + Algorithm 1: the hole's world frame from one wrist cloud, or None."""
-        pts = object_points(xyzw, tcp, self.peg)
+    def estimate_hole(
+        self, xyzw: np.ndarray, tcp: np.ndarray, pts: np.ndarray | None = None
+    ) -> np.ndarray | None:
+        """OAKN + Algorithm 1: the hole's world frame from one wrist cloud (or from its
+        tool-frame object points `pts`, if already taken), or None."""
+        if pts is None:
+            pts = object_points(xyzw, tcp, self.peg)
         if len(pts) < MIN_OBJECT_POINTS:
             return None
         x = torch.from_numpy(sample_fixed(pts, int(self.oakn_meta["points"]), self.rng))[None]
@@ -223,6 +234,19 @@ class CFVSAgent(Agent):
         pose = insertion_pose(self.peg, H if seen is None else seen, -PRE_INSERT_HEIGHT, T)
         return L.fine_action(tcp, pose), f"axis from the rim, {where}"
 
+    def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+        """The pre-insertion pose over hole frame `H`: at the yaw nearest the tool's own or,
+        with `clear_view`, the nearest whose camera sees the opening past what stands on
+        the face (`world`: the coarse view's object points)."""
+        nearest = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, tcp)
+        if not (self.cfg.clear_view and self.peg == "square" and self.task.dof != 3):
+            return nearest  # a 3-DoF peg keeps its yaw (task_dof.constrain)
+        x, y = nearest[:3, 0], nearest[:3, 1]
+        turns = sorted((x, y, -x, -y), key=lambda a: -float(a @ tcp[:3, 0]))  # least first
+        poses = [G.make(G.frame_with_z(nearest[:3, 2], a), nearest[:3, 3]) for a in turns]
+        i, _ = clear_view_yaw(world, poses, camera_in_tcp(), H)
+        return poses[i]
+
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return constrain(self.task, T, ref)
 
@@ -231,12 +255,13 @@ class CFVSAgent(Agent):
         xyzw = observation.obs["pointcloud"]["xyzw"][0].cpu().numpy()
         tcp = observation.tcp_pose
         if self.stage == "coarse":
-            H = self.estimate_hole(xyzw, tcp)
+            pts = object_points(xyzw, tcp, self.peg)
+            H = self.estimate_hole(xyzw, tcp, pts)
             if H is None or not np.all(np.isfinite(H)):
                 return Action.give_up("OAKN: the camera sees no hole object")
             self.phase, self.estimate = "coarse: OAKN keypoints -> hole frame", H
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
-            pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, tcp)
+            pose = self.approach(H, tool_to_world(pts, tcp), tcp)
             return Action.move(self.constrain(pose, tcp))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
             pts = object_points(xyzw, tcp, self.peg)  # tool frame

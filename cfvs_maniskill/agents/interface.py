@@ -95,3 +95,11 @@ def flange_pose(tcp: np.ndarray) -> np.ndarray:
     T = np.array(tcp, dtype=np.float64, copy=True)
     T[:3, 3] -= PEG_LENGTH * T[:3, 2]
     return T
+
+
+def camera_in_tcp() -> np.ndarray:
+    """The wrist camera's optical centre in the peg-tip (tcp) frame, from the robot's
+    drawing (its nominal mount: the calibration the robot believes, not the true one)."""
+    from cfvs_maniskill.robots.ur5 import CAMERA_OFFSET
+
+    return np.asarray(CAMERA_OFFSET, dtype=np.float64) - np.array([0.0, 0.0, PEG_LENGTH])

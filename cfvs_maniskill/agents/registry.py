@@ -76,6 +76,9 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     # The estimate's position and yaw as OPN gives them, without the opening fit (the
     # agent of session 16).
     "cfvs_no_opening": _cfvs("cfvs_no_opening", opening_fit=False),
+    # Always the approach yaw nearest the tool's, whatever stands between the camera and
+    # the opening (the agent of session 17).
+    "cfvs_fixed_yaw": _cfvs("cfvs_fixed_yaw", clear_view=False),
     # The face's plane by least median of squares alone, without the parallel-planes check.
     "cfvs_no_parallel": _cfvs("cfvs_no_parallel", rim_parallel_planes=False),
     # The networks before the sensor-mixed OPN and the part-trained OAKN (the fine stage

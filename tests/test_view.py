@@ -82,7 +82,7 @@ def test_a_wall_beyond_the_camera_or_too_low_to_reach_the_line_does_not_block():
     assert sight_blockage(low, camera, H) == 0
 
 
-def test_all_blocked_takes_the_least_blocked():
+def test_all_blocked_keeps_the_nearest_yaw():
     rng = np.random.default_rng(3)
     world, H = _scene(rng)
     # Walls on all four sides (the same wall turned); the one on -y seen more sparsely.
@@ -93,7 +93,7 @@ def test_all_blocked_takes_the_least_blocked():
         R = G.frame_with_z(np.array([0.0, 0.0, 1.0]), np.array([np.cos(a), np.sin(a), 0.0]))
         ring.append(wall[::step] @ R.T)
     i, counts = clear_view_yaw(np.vstack(ring), _poses(H, H[:3, 0]), camera_in_tcp(), H)
-    assert min(counts) >= BLOCKED and i == int(np.argmin(counts)) == 1, counts
+    assert min(counts) >= BLOCKED and int(np.argmin(counts)) == 1 and i == 0, counts
 
 
 @pytest.mark.slow

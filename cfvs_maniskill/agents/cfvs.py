@@ -92,6 +92,11 @@ class CFVSConfig:
     """Square holes: the ring follows the opening's sides (from OPN's yaw), starting 4 mm
     outside them. False: a round ring beyond the opening's corners, which on a 50 mm hole
     starts 39 mm out and falls off a small face (a boss, a hub) onto whatever is beyond."""
+    rim_narrow_ring: bool = True
+    """The rim fit tries a 10 mm ring before the 20 mm one and keeps it when the noise
+    measured on it predicts a normal within 0.1 deg (perception/rim.py): beside a step
+    round the opening (a counterbore) the wide ring reaches the step. False: the 20 mm
+    ring always (the agent before session 18's second change)."""
     opening_fit: bool = True
     """6-DoF square holes, with `rim_plane`: move the estimate in the face's plane and turn
     it about its axis onto the opening the wrist cloud shows, from the face's edge and the
@@ -223,6 +228,7 @@ class CFVSAgent(Agent):
             self.rng,
             parallel_planes=self.cfg.rim_parallel_planes,
             square_x=square_x,
+            narrow_first=self.cfg.rim_narrow_ring,
         )
         if n is None:
             return a, "OPN offset"

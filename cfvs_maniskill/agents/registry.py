@@ -79,6 +79,8 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     # Always the approach yaw nearest the tool's, whatever stands between the camera and
     # the opening (the agent of session 17).
     "cfvs_fixed_yaw": _cfvs("cfvs_fixed_yaw", clear_view=False),
+    # The rim fit on the 20 mm ring always, never the narrow one first (session 17-18).
+    "cfvs_wide_ring": _cfvs("cfvs_wide_ring", rim_narrow_ring=False),
     # The face's plane by least median of squares alone, without the parallel-planes check.
     "cfvs_no_parallel": _cfvs("cfvs_no_parallel", rim_parallel_planes=False),
     # The networks before the sensor-mixed OPN and the part-trained OAKN (the fine stage

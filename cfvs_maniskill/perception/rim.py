@@ -26,7 +26,17 @@ RING_MARGIN = 0.004
 farthest point): beyond the chamfer and a few millimetres of error in the estimated
 centre."""
 RING_WIDTH = 0.020
-"""... and is this wide."""
+"""... and is this wide, unless the narrow ring below is precise enough."""
+NARROW_RING_WIDTH = 0.010
+"""The ring tried first: beside a step round the opening (a counterbore's floor 6 mm
+below the top face, 2 cm out) a 20 mm ring reaches the step's wall and the face beyond
+and its plane came out 3.5-5.3 deg off; 10 mm holds the floor alone (0.03-0.07 deg on a
+recorded view)."""
+NARROW_MAX_ERROR_DEG = 0.1
+"""... taken when the standard error of its plane's normal, predicted from the sensor
+noise measured on it (sigma / (spread x sqrt(points))), is below this: under ideal and
+stereo sensors it is 0.01-0.05 deg; under 3 mm i.i.d. noise ~0.3 deg, where the 20 mm
+ring's twice the points and spread halve the error (tilt p90 0.58 against 1.21 deg)."""
 RING_BAND = 0.025
 """Only points within this distance of the estimated opening's plane: the face, not the
 floor under an edge. Wide, because OPN's estimate of the opening's height can be 1-2 cm
@@ -65,6 +75,7 @@ def rim_normal(
     rng: np.random.Generator,
     parallel_planes: bool = True,
     square_x: np.ndarray | None = None,
+    narrow_first: bool = True,
 ) -> np.ndarray | None:
     """Unit normal (on `axis`'s side) of the face around the opening estimated at `centre`
     with axis `axis` (out of the hole), from `points` (n, 3, same frame); None when the
@@ -75,13 +86,17 @@ def rim_normal(
     opening's x axis), its half width: the ring then follows the square's sides, so it
     starts next to the opening along them instead of beyond its corners. `parallel_planes`:
     check the least-median plane against the parallel-planes fit and take the latter where
-    they disagree by more than PARALLEL_DISAGREE_DEG (False: the least-median plane alone)."""
+    they disagree by more than PARALLEL_DISAGREE_DEG (False: the least-median plane alone).
+    `narrow_first`: try the NARROW_RING_WIDTH ring first (False: RING_WIDTH always)."""
     axis = axis / np.linalg.norm(axis)
-    n = _face_normal(points, centre, axis, opening_radius, rng, parallel_planes, square_x)
+    n = _face_normal(
+        points, centre, axis, opening_radius, rng, parallel_planes, square_x, narrow_first
+    )
     if n is None and square_x is not None:
         # Too little of the face beside the sides is in view (the peg hides it from the
         # wrist camera, or it ends there): the round ring beyond the corners.
-        n = _face_normal(points, centre, axis, opening_radius * np.sqrt(2), rng, parallel_planes)
+        reach = opening_radius * np.sqrt(2)
+        n = _face_normal(points, centre, axis, reach, rng, parallel_planes, None, narrow_first)
     return n
 
 
@@ -93,11 +108,15 @@ def _face_normal(
     rng: np.random.Generator,
     parallel_planes: bool,
     square_x: np.ndarray | None = None,
+    narrow_first: bool = True,
 ) -> np.ndarray | None:
     """rim_normal on one ring: the least-median plane, checked by the parallel planes."""
+    width = RING_WIDTH
+    if narrow_first:
+        width = _ring_width(points, centre, axis, reach + RING_MARGIN, rng, square_x)
 
     def ring(normal: np.ndarray) -> np.ndarray:
-        return _ring(points, centre, normal, reach + RING_MARGIN, square_x)
+        return _ring(points, centre, normal, reach + RING_MARGIN, square_x, width)
 
     around_axis = ring(axis)  # both fits start from it
     n = _two_passes(ring, around_axis, axis, rng)
@@ -125,14 +144,42 @@ def _two_passes(ring, first: np.ndarray, axis: np.ndarray, rng: np.random.Genera
     return n if again is None else again
 
 
+def _ring_width(
+    points: np.ndarray,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    inner: float,
+    rng: np.random.Generator,
+    square_x: np.ndarray | None,
+) -> float:
+    """NARROW_RING_WIDTH when the narrow ring's least-median plane is predicted precise
+    enough (NARROW_MAX_ERROR_DEG) from the noise measured on it, else RING_WIDTH."""
+    narrow = _ring(points, centre, axis, inner, square_x, NARROW_RING_WIDTH)
+    if len(narrow) < MIN_RING_POINTS:
+        return RING_WIDTH
+    origins, normals = _hypotheses(narrow, rng)
+    if len(normals) == 0:
+        return RING_WIDTH
+    _, med, residual = _least_median(narrow, origins, normals)
+    sigma = 1.4826 * (1 + 5 / (len(narrow) - 3)) * np.sqrt(med)
+    inliers = narrow[np.abs(residual) <= 2.5 * sigma + 1e-6]
+    if len(inliers) < MIN_RING_POINTS // 2:
+        return RING_WIDTH
+    d = inliers - inliers.mean(axis=0)
+    spread = np.sqrt(np.mean(np.sum(d**2, axis=1)))
+    error = np.degrees(sigma / (spread * np.sqrt(len(inliers))))
+    return NARROW_RING_WIDTH if error < NARROW_MAX_ERROR_DEG else RING_WIDTH
+
+
 def _ring(
     points: np.ndarray,
     centre: np.ndarray,
     axis: np.ndarray,
     inner: float,
     square_x: np.ndarray | None = None,
+    width: float = RING_WIDTH,
 ) -> np.ndarray:
-    """The points RING_WIDTH wide outside `inner` around the axis, near its plane: outside
+    """The points `width` wide outside `inner` around the axis, near its plane: outside
     a circle of that radius, or with `square_x` a square of that half width."""
     d = points - centre
     h = d @ axis
@@ -143,7 +190,7 @@ def _ring(
         ex = square_x - (square_x @ axis) * axis
         ex /= np.linalg.norm(ex)
         dist = np.maximum(np.abs(across @ ex), np.abs(across @ np.cross(axis, ex)))
-    return points[(dist > inner) & (dist < inner + RING_WIDTH) & (np.abs(h) < RING_BAND)]
+    return points[(dist > inner) & (dist < inner + width) & (np.abs(h) < RING_BAND)]
 
 
 def _plane_normal(ring: np.ndarray, axis: np.ndarray, rng: np.random.Generator):

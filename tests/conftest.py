@@ -37,3 +37,20 @@ def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout
     )
+
+
+def cfvs_outcomes(env, seed: int, configs: dict) -> dict:
+    """(success, reason) of one scene for each CFVS agent of `configs` (label ->
+    CFVSConfig keyword arguments): a paired comparison on the same env and seed."""
+    from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
+    from cfvs_maniskill.agents.executor import Executor
+    from cfvs_maniskill.agents.interface import TaskSpec
+    from cfvs_maniskill.episode import run_episode
+
+    ex = Executor(env)
+    out = {}
+    for label, kwargs in configs.items():
+        agent = CFVSAgent(TaskSpec.of(env.unwrapped.task), CFVSConfig(**kwargs))
+        r = run_episode(env, agent, ex, seed=seed)
+        out[label] = (r.success, r.reason)
+    return out

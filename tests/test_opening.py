@@ -10,6 +10,8 @@ import pytest
 
 from cfvs_maniskill.perception.opening import face_level, fit_opening
 
+from .conftest import cfvs_outcomes
+
 HALF = 0.02325  # the 0.5 mm task's square hole
 DATA = Path(__file__).parent / "data"
 
@@ -113,11 +115,6 @@ def test_the_opening_fit_seats_a_tight_peg_beside_ribs_where_opn_alone_stops_on_
     """Held-out set B's ribbed disc at 0.5 mm (two ribs 1 cm from the hole): OPN alone
     leaves the peg ~1 mm and ~2 deg (yaw) off and it stops on the rim; with the opening fit
     the same scene inserts (seed from the held-out tight-fit run, docs/results.md)."""
-    from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
-    from cfvs_maniskill.agents.executor import Executor
-    from cfvs_maniskill.agents.interface import TaskSpec
-    from cfvs_maniskill.episode import run_episode
-
     assets = str(Path(__file__).parents[1] / "assets" / "heldout_b")
     env = make_env(
         "PegInsert6DoF-0.5mm-v1",
@@ -127,11 +124,6 @@ def test_the_opening_fit_seats_a_tight_peg_beside_ribs_where_opn_alone_stops_on_
     )
     u = env.unwrapped
     u.init_error_m = u.task.init_error["small"]
-    ex = Executor(env)
-    outcome = {}
-    for fit in (False, True):
-        agent = CFVSAgent(TaskSpec.of(u.task), CFVSConfig(opening_fit=fit))
-        r = run_episode(env, agent, ex, seed=1751262970)
-        outcome[fit] = (r.success, r.reason)
-    assert not outcome[False][0], outcome
-    assert outcome[True][0], outcome
+    outcome = cfvs_outcomes(env, 1751262970, {"opn": {"opening_fit": False}, "fit": {}})
+    assert not outcome["opn"][0], outcome
+    assert outcome["fit"][0], outcome

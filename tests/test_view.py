@@ -13,6 +13,8 @@ from cfvs_maniskill.agents.interface import camera_in_tcp, insertion_pose
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.perception.view import BLOCKED, clear_view_yaw, sight_blockage
 
+from .conftest import cfvs_outcomes
+
 
 def _scene(rng, wall_at: float | None = 0.06, tilt_deg: float = 0.0):
     """World points of a face around a hole at the origin (hole frame = world, unless
@@ -103,11 +105,6 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
     """Held-out set C's wall bracket (an upright wall 10 cm tall, 2.5 cm from the hole),
     6-DoF: at the yaw nearest the tool's the camera ends up behind the wall and the fine
     stage sees nothing; turned to a clear side the same scene inserts."""
-    from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
-    from cfvs_maniskill.agents.executor import Executor
-    from cfvs_maniskill.agents.interface import TaskSpec
-    from cfvs_maniskill.episode import run_episode
-
     assets = str(Path(__file__).parents[1] / "assets" / "heldout_c")
     env = make_env(
         "PegInsert6DoF-v1",
@@ -115,11 +112,6 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
         objects=("heldoutc_wall_bracket",),
         assets=(assets,),
     )
-    ex = Executor(env)
-    outcome = {}
-    for clear in (False, True):
-        agent = CFVSAgent(TaskSpec.of(env.unwrapped.task), CFVSConfig(clear_view=clear))
-        r = run_episode(env, agent, ex, seed=202)
-        outcome[clear] = (r.success, r.reason)
-    assert not outcome[False][0] and "nothing seen" in outcome[False][1], outcome
-    assert outcome[True][0], outcome
+    outcome = cfvs_outcomes(env, 202, {"nearest": {"clear_view": False}, "clear": {}})
+    assert not outcome["nearest"][0] and "nothing seen" in outcome["nearest"][1], outcome
+    assert outcome["clear"][0], outcome

@@ -154,17 +154,10 @@ def _ring_width(
 ) -> float:
     """NARROW_RING_WIDTH when the narrow ring's least-median plane is predicted precise
     enough (NARROW_MAX_ERROR_DEG) from the noise measured on it, else RING_WIDTH."""
-    narrow = _ring(points, centre, axis, inner, square_x, NARROW_RING_WIDTH)
-    if len(narrow) < MIN_RING_POINTS:
+    fit = _plane_inliers(_ring(points, centre, axis, inner, square_x, NARROW_RING_WIDTH), rng)
+    if fit is None:
         return RING_WIDTH
-    origins, normals = _hypotheses(narrow, rng)
-    if len(normals) == 0:
-        return RING_WIDTH
-    _, med, residual = _least_median(narrow, origins, normals)
-    sigma = 1.4826 * (1 + 5 / (len(narrow) - 3)) * np.sqrt(med)
-    inliers = narrow[np.abs(residual) <= 2.5 * sigma + 1e-6]
-    if len(inliers) < MIN_RING_POINTS // 2:
-        return RING_WIDTH
+    inliers, sigma = fit
     d = inliers - inliers.mean(axis=0)
     spread = np.sqrt(np.mean(np.sum(d**2, axis=1)))
     error = np.degrees(sigma / (spread * np.sqrt(len(inliers))))
@@ -193,13 +186,14 @@ def _ring(
     return points[(dist > inner) & (dist < inner + width) & (np.abs(h) < RING_BAND)]
 
 
-def _plane_normal(ring: np.ndarray, axis: np.ndarray, rng: np.random.Generator):
-    """The dominant plane's unit normal (on `axis`'s side), or None with too few points."""
+def _plane_inliers(ring: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, float] | None:
+    """The dominant plane's inliers and the noise measured about it (a robust sigma, m),
+    or None with too few points. Least median of squares: the plane through 3 random
+    points that leaves the smallest median squared distance; its inliers are the points
+    within 2.5 robust sigmas (sigma from that median: the sensor's noise, whatever the
+    sensor)."""
     if len(ring) < MIN_RING_POINTS:
         return None
-    # Least median of squares: the plane through 3 random points that leaves the smallest
-    # median squared distance; then a least-squares fit to the points within 2.5 robust
-    # sigmas of it (sigma from that median: the sensor's noise, whatever the sensor).
     origins, normals = _hypotheses(ring, rng)
     if len(normals) == 0:
         return None
@@ -208,6 +202,16 @@ def _plane_normal(ring: np.ndarray, axis: np.ndarray, rng: np.random.Generator):
     inliers = ring[np.abs(residual) <= 2.5 * sigma + 1e-6]
     if len(inliers) < MIN_RING_POINTS // 2:
         return None
+    return inliers, float(sigma)
+
+
+def _plane_normal(ring: np.ndarray, axis: np.ndarray, rng: np.random.Generator):
+    """The dominant plane's unit normal (on `axis`'s side), a least-squares fit to the
+    least-median plane's inliers, or None with too few points."""
+    fit = _plane_inliers(ring, rng)
+    if fit is None:
+        return None
+    inliers, _ = fit
     _, _, vt = np.linalg.svd(inliers - inliers.mean(axis=0), full_matrices=False)
     n = vt[2]
     return n if n @ axis >= 0 else -n

@@ -39,14 +39,21 @@ def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
     )
 
 
-def cfvs_outcomes(env, seed: int, configs: dict) -> dict:
-    """(success, reason) of one scene for each CFVS agent of `configs` (label ->
-    CFVSConfig keyword arguments): a paired comparison on the same env and seed."""
+def held_out_outcomes(
+    make_env, env_id: str, folder: str, obj: str, seed: int, configs: dict, init_error=None
+) -> dict:
+    """(success, reason) of one scene on held-out object `obj` (from `assets/<folder>`) for
+    each CFVS agent of `configs` (label -> CFVSConfig keyword arguments): a paired
+    comparison on the same env and seed."""
     from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
     from cfvs_maniskill.agents.executor import Executor
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.episode import run_episode
 
+    assets = str(ROOT / "assets" / folder)
+    env = make_env(env_id, obs_mode="pointcloud", objects=(obj,), assets=(assets,))
+    if init_error is not None:
+        env.unwrapped.init_error_m = env.unwrapped.task.init_error[init_error]
     ex = Executor(env)
     out = {}
     for label, kwargs in configs.items():

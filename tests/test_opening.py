@@ -10,7 +10,7 @@ import pytest
 
 from cfvs_maniskill.perception.opening import face_level, fit_opening
 
-from .conftest import cfvs_outcomes
+from .conftest import held_out_outcomes
 
 HALF = 0.02325  # the 0.5 mm task's square hole
 DATA = Path(__file__).parent / "data"
@@ -115,15 +115,14 @@ def test_the_opening_fit_seats_a_tight_peg_beside_ribs_where_opn_alone_stops_on_
     """Held-out set B's ribbed disc at 0.5 mm (two ribs 1 cm from the hole): OPN alone
     leaves the peg ~1 mm and ~2 deg (yaw) off and it stops on the rim; with the opening fit
     the same scene inserts (seed from the held-out tight-fit run, docs/results.md)."""
-    assets = str(Path(__file__).parents[1] / "assets" / "heldout_b")
-    env = make_env(
+    outcome = held_out_outcomes(
+        make_env,
         "PegInsert6DoF-0.5mm-v1",
-        obs_mode="pointcloud",
-        objects=("heldoutb_ribbed_disc",),
-        assets=(assets,),
+        "heldout_b",
+        "heldoutb_ribbed_disc",
+        1751262970,
+        {"opn": {"opening_fit": False}, "fit": {}},
+        init_error="small",
     )
-    u = env.unwrapped
-    u.init_error_m = u.task.init_error["small"]
-    outcome = cfvs_outcomes(env, 1751262970, {"opn": {"opening_fit": False}, "fit": {}})
     assert not outcome["opn"][0], outcome
     assert outcome["fit"][0], outcome

@@ -3,8 +3,6 @@ yaws keeps what stands on the face out of the wrist camera's line of sight."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -13,7 +11,7 @@ from cfvs_maniskill.agents.interface import camera_in_tcp, insertion_pose
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.perception.view import BLOCKED, clear_view_yaw, sight_blockage
 
-from .conftest import cfvs_outcomes
+from .conftest import held_out_outcomes
 
 
 def _scene(rng, wall_at: float | None = 0.06, tilt_deg: float = 0.0):
@@ -105,13 +103,13 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
     """Held-out set C's wall bracket (an upright wall 10 cm tall, 2.5 cm from the hole),
     6-DoF: at the yaw nearest the tool's the camera ends up behind the wall and the fine
     stage sees nothing; turned to a clear side the same scene inserts."""
-    assets = str(Path(__file__).parents[1] / "assets" / "heldout_c")
-    env = make_env(
+    outcome = held_out_outcomes(
+        make_env,
         "PegInsert6DoF-v1",
-        obs_mode="pointcloud",
-        objects=("heldoutc_wall_bracket",),
-        assets=(assets,),
+        "heldout_c",
+        "heldoutc_wall_bracket",
+        202,
+        {"nearest": {"clear_view": False}, "clear": {}},
     )
-    outcome = cfvs_outcomes(env, 202, {"nearest": {"clear_view": False}, "clear": {}})
     assert not outcome["nearest"][0] and "nothing seen" in outcome["nearest"][1], outcome
     assert outcome["clear"][0], outcome

@@ -7,9 +7,9 @@ Beside a wall, a post or a tower standing over the face, some of them put that t
 between the camera and the opening: the camera sees the obstacle's back and the fine stage
 has nothing to servo on. Before the coarse move, the cloud of the whole scene (seen from
 15-30 cm) gives, for each yaw, the points standing above the face near the line from where
-the camera will be to the opening (`sight_blockage`). The yaw nearest the tool's own is kept unless that line
-is blocked and another is clear, so the wrist turns no more than it must and nothing
-changes where nothing stands in the way.
+the camera will be to the opening (`sight_blockage`). The yaw nearest the tool's own is
+kept unless that line is blocked and another is clear, so the wrist turns no more than it
+must and nothing changes where nothing stands in the way.
 """
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ STANDING = 0.01
 face itself (and a coarse axis a few degrees off, which tilts it by millimetres near the
 opening) never blocks."""
 BLOCKED = 10
-"""A line of sight with at least this many such points is blocked: a wall crossing it
-puts ~100 there from 15-30 cm; a few flying pixels or a grazed edge stay below."""
+"""A line of sight with at least this many such points is blocked: the wall bracket's wall
+put 12-450 there (most over 50) from 15-30 cm; a few flying pixels or a grazed edge stay
+below."""
 
 
 def sight_blockage(world: np.ndarray, camera: np.ndarray, hole: np.ndarray) -> int:

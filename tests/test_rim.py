@@ -197,7 +197,7 @@ def _counterbore(rng, noise: float, tilt_deg: float = 0.0):
 def test_a_counterbore_round_the_opening_is_read_from_the_narrow_ring_when_noise_allows():
     """The floor round the opening is the face; a 20 mm ring also holds the counterbore's
     wall and the top face beyond it, and tilted the fit 3.5-5.3 deg on set E's counterbore
-    plate (here 0.5-1.7 deg over these seeds). Under low noise the narrow ring is precise
+    plate (here 1.0-1.7 deg over these seeds). Under low noise the narrow ring is precise
     enough and holds the floor alone; under 3 mm the wide one is taken (twice the points
     and spread), as before."""
     x = np.array([1.0, 0.0, 0.0])

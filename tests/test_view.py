@@ -9,7 +9,12 @@ import pytest
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.interface import camera_in_tcp, insertion_pose
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
-from cfvs_maniskill.perception.view import BLOCKED, clear_view_yaw, sight_blockage
+from cfvs_maniskill.perception.view import (
+    BLOCKED,
+    approach_yaws,
+    clear_view_yaw,
+    sight_blockage,
+)
 
 from .conftest import held_out_outcomes
 
@@ -36,13 +41,15 @@ def _scene(rng, wall_at: float | None = 0.06, tilt_deg: float = 0.0):
 
 
 def _poses(H: np.ndarray, first_x: np.ndarray) -> list[np.ndarray]:
-    """Pre-insertion poses at the four yaws, the one with tool x nearest `first_x` first,
-    then the two 90 deg turns and the half turn (the order the agent tries them in)."""
-    P = insertion_pose(
-        "square", H, -PRE_INSERT_HEIGHT, G.make(G.frame_with_z(-H[:3, 2], first_x), np.zeros(3))
-    )
-    x, y = P[:3, 0], P[:3, 1]
-    return [G.make(G.frame_with_z(P[:3, 2], a), P[:3, 3]) for a in (x, y, -y, -x)]
+    """Pre-insertion poses at the four yaws, in the order the agent tries them from a tool
+    whose x is `first_x`: the nearest first, the two 90 deg turns, the half turn last."""
+    tool = G.make(G.frame_with_z(-H[:3, 2], first_x), np.zeros(3))
+    poses = approach_yaws(insertion_pose("square", H, -PRE_INSERT_HEIGHT, tool), first_x)
+    x, y = poses[0][:3, 0], poses[0][:3, 1]  # the order these tests' indices assume
+    assert [np.allclose(P[:3, 0], a) for P, a in zip(poses, (x, y, -y, -x), strict=True)] == [
+        True
+    ] * 4
+    return poses
 
 
 def _camera_side(P: np.ndarray, H: np.ndarray) -> np.ndarray:

@@ -28,7 +28,6 @@ import numpy as np
 import torch
 import yaml
 
-from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, camera_in_tcp, insertion_pose
 from cfvs_maniskill.constants import AGENTS_DIR, PRE_INSERT_HEIGHT, hole_half_extent
@@ -44,7 +43,7 @@ from cfvs_maniskill.perception.clouds import (
 )
 from cfvs_maniskill.perception.opening import fit_opening
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
-from cfvs_maniskill.perception.view import clear_view_yaw
+from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
 
 WEIGHTS_DIR = AGENTS_DIR / "cfvs"
@@ -247,9 +246,7 @@ class CFVSAgent(Agent):
         nearest = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, tcp)
         if not (self.cfg.clear_view and self.peg == "square" and self.task.dof != 3):
             return nearest  # a 3-DoF peg keeps its yaw (task_dof.constrain)
-        x, y = nearest[:3, 0], nearest[:3, 1]
-        turns = sorted((x, y, -x, -y), key=lambda a: -float(a @ tcp[:3, 0]))  # least first
-        poses = [G.make(G.frame_with_z(nearest[:3, 2], a), nearest[:3, 3]) for a in turns]
+        poses = approach_yaws(nearest, tcp[:3, 0])
         i, _ = clear_view_yaw(world, poses, camera_in_tcp(), H)
         return poses[i]
 

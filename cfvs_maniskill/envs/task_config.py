@@ -15,11 +15,11 @@ from cfvs_maniskill.constants import (
     TASKS_DIR,
     peg_half_extent,
 )
+from cfvs_maniskill.errors import FileFieldError
 
 
-class TaskConfigError(ValueError):
-    def __init__(self, file: Path | str, field_name: str, message: str):
-        super().__init__(f"{file}: field '{field_name}': {message}")
+class TaskConfigError(FileFieldError):
+    """A task file that cannot be used."""
 
 
 @dataclass(frozen=True)

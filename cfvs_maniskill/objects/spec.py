@@ -36,6 +36,7 @@ from typing import Any
 import yaml
 
 from cfvs_maniskill.constants import PEG_PROFILES
+from cfvs_maniskill.errors import FileFieldError
 
 SPLITS = ("train", "test")
 TOP_KEYS = ("name", "split", "hole", "body", "hole_at", "hole_frame", "color")
@@ -51,19 +52,8 @@ MESH_SUFFIXES = (".obj", ".stl", ".ply")
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
-class HoleSpecError(ValueError):
+class HoleSpecError(FileFieldError):
     """A hole-object file that cannot be used. `str()` names file, field and expectation."""
-
-    def __init__(self, file: Path | str, field: str, message: str):
-        self.file = str(file)
-        self.field = field
-        self.message = message
-        super().__init__(f"{self.file}: field '{field}': {message}")
-
-    def __reduce__(self):
-        # Raised in an eval worker process, it must survive the trip back to the parent
-        # intact (the default pickling calls __init__ with the message alone and fails).
-        return type(self), (self.file, self.field, self.message)
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from cfvs_maniskill import geometry as G
+
 SIGHT_RADIUS = 0.015
 """Points within this distance of the camera's line of sight to the opening, measured
 across the face, may block it (about the half width of the wrist camera's view of the
@@ -46,6 +48,15 @@ def sight_blockage(world: np.ndarray, camera: np.ndarray, hole: np.ndarray) -> i
     line_height = cam[2] * (1.0 - t)
     h = local[:, 2]
     return int(np.count_nonzero((across < SIGHT_RADIUS) & (h > STANDING) & (h >= line_height)))
+
+
+def approach_yaws(nearest: np.ndarray, tool_x: np.ndarray) -> list[np.ndarray]:
+    """The four pre-insertion poses of a square peg: `nearest` (4x4) and the same turned
+    about its axis by 90, -90 and 180 deg, ordered by how far the wrist turns to reach them
+    from a tool whose x axis is `tool_x` (least first)."""
+    x, y = nearest[:3, 0], nearest[:3, 1]
+    turns = sorted((x, y, -x, -y), key=lambda a: -float(a @ tool_x))
+    return [G.make(G.frame_with_z(nearest[:3, 2], a), nearest[:3, 3]) for a in turns]
 
 
 def clear_view_yaw(

@@ -13,18 +13,14 @@ from typing import Any
 import yaml
 
 from cfvs_maniskill.constants import SENSORS_DIR
+from cfvs_maniskill.errors import FileFieldError
 
 DEFAULT_SENSOR = "ideal"
 DEPTH_MODELS = ("iid", "stereo")
 
 
-class SensorProfileError(ValueError):
-    def __init__(self, file: Path | str, field_name: str, message: str):
-        self.args_ = (str(file), field_name, message)
-        super().__init__(f"{file}: field '{field_name}': {message}")
-
-    def __reduce__(self):  # picklable across worker processes, like HoleSpecError
-        return type(self), self.args_
+class SensorProfileError(FileFieldError):
+    """A sensor-profile file that cannot be used."""
 
 
 @dataclass(frozen=True)

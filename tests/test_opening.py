@@ -1,5 +1,6 @@
-"""The opening's centre and yaw from the face's inner edge (perception/opening.py): on
-synthetic faces with the peg's shadow at the near edge, and on recorded wrist views."""
+"""The opening's centre and yaw from the face's inner edge, and its height from the face
+beside it (perception/opening.py): on synthetic faces with the peg's shadow at the near
+edge, on recorded wrist views, and in held-out episodes."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cfvs_maniskill.perception.opening import face_level, fit_opening
+from cfvs_maniskill.perception.opening import face_height, face_level, fit_opening
 
 from .conftest import held_out_outcomes
 
@@ -92,6 +93,33 @@ def test_the_face_level_is_the_dense_flat_part_not_a_rib_or_the_wall():
     assert abs(level) < 0.0003 and 0.0007 < sigma < 0.0014
 
 
+@pytest.mark.parametrize("noise", [0.001, 0.003])
+def test_the_opening_height_is_the_face_beside_it_not_a_rib_the_wall_or_the_estimate(noise):
+    rng = np.random.default_rng(3)
+    pts = _view(rng, noise=noise, rib=True)
+    for dz in (0.0035, -0.02):  # OPN's estimate 3.5 mm above the face, 2 cm below it
+        level = face_height(pts, _frame(1.0, (0.0005, -0.0005, dz)), HALF)
+        assert level is not None and abs(dz + level) < 0.0003, (dz, level)
+
+
+def test_a_round_openings_height_and_no_height_without_a_clear_face():
+    rng = np.random.default_rng(4)
+    radius = 0.0235
+    g = rng.uniform(-0.04, 0.04, size=(30000, 2))
+    face = g[np.linalg.norm(g, axis=1) > radius]
+    pts = np.column_stack([face, rng.normal(0.0, 0.001, len(face))])
+    # The square ring of a round opening would reach into the hole at the diagonals (its
+    # floor 40 mm down): a round one does not.
+    floor = rng.uniform(-radius, radius, size=(3000, 2))
+    floor = floor[np.linalg.norm(floor, axis=1) < radius]
+    pts = np.vstack([pts, np.column_stack([floor, np.full(len(floor), -0.04)])])
+    level = face_height(pts, _frame(0.0, (0.0, 0.0, 0.004)), radius, round_opening=True)
+    assert level is not None and abs(level + 0.004) < 0.0002, level
+    assert face_height(pts[:20], _frame(), radius, round_opening=True) is None
+    noisy = pts + rng.normal(0.0, 0.012, pts.shape)  # edges and face lost in the noise
+    assert face_height(noisy, _frame(), radius, round_opening=True) is None
+
+
 @pytest.mark.parametrize(
     "name", ["heldoutb_pocket_block_view_11.npz", "heldoutd_twin_boss_view_12.npz"]
 )
@@ -126,3 +154,22 @@ def test_the_opening_fit_seats_a_tight_peg_beside_ribs_where_opn_alone_stops_on_
     )
     assert not outcome["opn"][0], outcome
     assert outcome["fit"][0], outcome
+
+
+@pytest.mark.slow
+def test_the_face_height_frees_a_tight_peg_that_opns_height_left_wedged_in_the_entry(make_env):
+    """Held-out set A's walled plate at 0.5 mm (a wall 1.5 cm from the hole): OPN puts the
+    opening 3.4 mm above the face, so the force-guided insertion takes a peg wedged 1.8 mm
+    into the entry for one deep in the hole and stops; with the opening's height from the
+    face the same scene inserts (seed from the held-out tight-fit run, docs/results.md)."""
+    outcome = held_out_outcomes(
+        make_env,
+        "PegInsert6DoF-0.5mm-v1",
+        "heldout",
+        "heldout_walled_plate",
+        717486823,
+        {"opn": {"face_height": False}, "face": {}},
+        init_error="small",
+    )
+    assert outcome["opn"] == (False, "peg stuck 1.8 mm into the hole's entry"), outcome
+    assert outcome["face"][0], outcome

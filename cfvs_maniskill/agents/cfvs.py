@@ -41,7 +41,7 @@ from cfvs_maniskill.perception.clouds import (
     sample_fixed,
     tool_to_world,
 )
-from cfvs_maniskill.perception.opening import fit_opening
+from cfvs_maniskill.perception.opening import face_height, fit_opening
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
@@ -101,6 +101,12 @@ class CFVSConfig:
     it about its axis onto the opening the wrist cloud shows, from the face's edge and the
     walls in view (perception/opening.py; the hole's size is the task's nominal one).
     False: OPN's position and yaw (the agent before session 17). Round holes keep OPN's."""
+    face_height: bool = True
+    """6-DoF, with `rim_plane`: put the hole's opening at the level of the face seen just
+    outside it (perception/opening.face_height) instead of OPN's height. OPN's height was
+    measured 3-4 mm above the face beside walls and pockets and 2 cm off on a flange, where
+    the force-guided insertion took a peg wedged in the entry for one deep in the hole.
+    False: OPN's height (the agent before session 19)."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the
@@ -236,7 +242,14 @@ class CFVSAgent(Agent):
         if self.cfg.opening_fit and self.peg == "square":
             seen = fit_opening(world, H, half)
         where = "OPN position" if seen is None else "centre from the opening"
-        pose = insertion_pose(self.peg, H if seen is None else seen, -PRE_INSERT_HEIGHT, T)
+        H = H if seen is None else seen
+        if self.cfg.face_height:
+            level = face_height(world, H, half, round_opening=self.peg == "round")
+            if level is not None:
+                H = H.copy()
+                H[:3, 3] += level * H[:3, 2]
+                where += ", height from the face"
+        pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
         return L.fine_action(tcp, pose), f"axis from the rim, {where}"
 
     def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:

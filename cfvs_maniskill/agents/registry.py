@@ -63,26 +63,33 @@ EARLIER_FINE_LOOP = {"tol_translation": 0.0015, "vote_gate": 0.0, "final_correct
 """The fine loop before e_t 1.0 mm, the single-vote steps and the final correction: the
 comparison variants keep it, so their committed records stay what the code does."""
 
+BEFORE_FACE_HEIGHT = {"face_height": False}
+"""OPN's height for the opening (the agents before session 19): the comparison variants
+keep it, so their committed records stay what the code does; `cfvs_opn_height` is the
+agent they compare with."""
+
 AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs": _cfvs(),
     # The paper's ablations (Table IV).
-    "cfvs_no_c2f": _cfvs("cfvs_no_c2f", coarse_to_fine=False),
-    "cfvs_no_map": _cfvs("cfvs_no_map", confidence_map=False),
-    "cfvs_no_aug": _cfvs("cfvs_no_aug", augmentation=False),
+    "cfvs_no_c2f": _cfvs("cfvs_no_c2f", coarse_to_fine=False, **BEFORE_FACE_HEIGHT),
+    "cfvs_no_map": _cfvs("cfvs_no_map", confidence_map=False, **BEFORE_FACE_HEIGHT),
+    "cfvs_no_aug": _cfvs("cfvs_no_aug", augmentation=False, **BEFORE_FACE_HEIGHT),
     # The paper's full model (with its augmentation), as measured: the fine loop of then.
     "cfvs_aug": _cfvs("cfvs_aug", augmentation=True, rim_plane=False, **EARLIER_FINE_LOOP),
     # The fine stage as the paper has it: OPN's own tilt, not the face around the opening.
     "cfvs_no_rim": _cfvs("cfvs_no_rim", rim_plane=False),
+    # The opening's height as OPN gives it (the agent of session 18).
+    "cfvs_opn_height": _cfvs("cfvs_opn_height", **BEFORE_FACE_HEIGHT),
     # The estimate's position and yaw as OPN gives them, without the opening fit (the
     # agent of session 16).
-    "cfvs_no_opening": _cfvs("cfvs_no_opening", opening_fit=False),
+    "cfvs_no_opening": _cfvs("cfvs_no_opening", opening_fit=False, **BEFORE_FACE_HEIGHT),
     # Always the approach yaw nearest the tool's, whatever stands between the camera and
     # the opening (the agent of session 17).
-    "cfvs_fixed_yaw": _cfvs("cfvs_fixed_yaw", clear_view=False),
+    "cfvs_fixed_yaw": _cfvs("cfvs_fixed_yaw", clear_view=False, **BEFORE_FACE_HEIGHT),
     # The rim fit on the 20 mm ring always, never the narrow one first (session 17-18).
-    "cfvs_wide_ring": _cfvs("cfvs_wide_ring", rim_narrow_ring=False),
+    "cfvs_wide_ring": _cfvs("cfvs_wide_ring", rim_narrow_ring=False, **BEFORE_FACE_HEIGHT),
     # The face's plane by least median of squares alone, without the parallel-planes check.
-    "cfvs_no_parallel": _cfvs("cfvs_no_parallel", rim_parallel_planes=False),
+    "cfvs_no_parallel": _cfvs("cfvs_no_parallel", rim_parallel_planes=False, **BEFORE_FACE_HEIGHT),
     # The networks before the sensor-mixed OPN and the part-trained OAKN (the fine stage
     # trained on the ideal sensor's clouds only, the coarse one on plain bodies), with the
     # fine loop's stop of then (e_t 1.5 mm): what training on the sensors' noise and on
@@ -91,7 +98,7 @@ AGENTS: dict[str, Callable[..., Agent]] = {
         "cfvs_ideal_data", weights="ideal_data", rim_plane=False, **EARLIER_FINE_LOOP
     ),
     # The coarse network before it was trained on part-like bodies (agents/cfvs/README.md).
-    "cfvs_oakn_plain": _cfvs("cfvs_oakn_plain", weights="oakn_plain"),
+    "cfvs_oakn_plain": _cfvs("cfvs_oakn_plain", weights="oakn_plain", **BEFORE_FACE_HEIGHT),
     # The paper's baselines (Table II).
     "icp": _icp("workspace"),
     "icp_kpts": _icp("oakn"),

@@ -12,7 +12,7 @@ import numpy as np
 from cfvs_maniskill.agents.base import Agent, Observation
 from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import robot_view
-from cfvs_maniskill.constants import INSERT_OVERSHOOT, PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import INSERT_OVERSHOOT, PRE_INSERT_HEIGHT, SUCCESS_TIP_TOLERANCE
 
 if TYPE_CHECKING:
     from cfvs_maniskill.rendering.film import Film
@@ -54,6 +54,10 @@ def failure_reason(m: dict, depth: float) -> str:
         if m["lateral_offset"] < 0.06:
             return f"peg stopped on the rim ({1000 * m['lateral_offset']:.1f} mm off the axis)"
         return f"peg missed the hole ({1000 * m['lateral_offset']:.0f} mm off the axis)"
+    if abs(m["tip_to_bottom"]) <= SUCCESS_TIP_TOLERANCE:
+        # As deep as the hole's bottom, so the peg is not in it: it went down beside the
+        # part (a hole near an edge) or through a gap next to the opening.
+        return f"peg went down beside the hole ({1000 * m['lateral_offset']:.1f} mm off the axis)"
     return f"peg stuck {1000 * m['tip_to_bottom']:.1f} mm above the hole's bottom"
 
 

@@ -115,7 +115,7 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
         "PegInsert6DoF-v1",
         "heldout_c",
         "heldoutc_wall_bracket",
-        202,
+        191,
         {"nearest": {"clear_view": False}, "clear": {}},
     )
     assert not outcome["nearest"][0] and "nothing seen" in outcome["nearest"][1], outcome

@@ -41,7 +41,7 @@ from cfvs_maniskill.perception.clouds import (
     sample_fixed,
     tool_to_world,
 )
-from cfvs_maniskill.perception.opening import face_height, fit_opening
+from cfvs_maniskill.perception.opening import MIN_LEVEL_POINTS, face_height, fit_opening
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
@@ -107,6 +107,14 @@ class CFVSConfig:
     measured 3-4 mm above the face beside walls and pockets and 2 cm off on a flange, where
     the force-guided insertion took a peg wedged in the entry for one deep in the hole.
     False: OPN's height (the agent before session 19)."""
+    face_guard: bool = True
+    """6-DoF, with `face_height`: when OPN's new estimate has no face round its opening in
+    the cloud (fewer than MIN_LEVEL_POINTS 1-6 mm outside it) after an estimate that had
+    one, the fine loop stops and the peg is inserted from where it is, the pose of the last
+    estimate the face supported. Beside a step or a gusset OPN can jump to another surface
+    from one step to the next (a 4 cm step's top: 42 mm above the face, 6 mm aside) and
+    the loop alternated between the two to its limit. False: every estimate is taken (the
+    agent of session 19's first change, `cfvs_no_face_guard`)."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the
@@ -158,9 +166,13 @@ class CFVSAgent(Agent):
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
+        self.face_seen: bool | None = None
+        self.had_face = False
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
+        # Whether the face round the opening was seen at the latest / any fine estimate.
+        self.face_seen, self.had_face = None, False
         self.phase, self.estimate = "", None
         # Point subsets are random; seeded from the episode's seed, the same env seed gives
         # the same episode.
@@ -244,7 +256,8 @@ class CFVSAgent(Agent):
         where = "OPN position" if seen is None else "centre from the opening"
         H = H if seen is None else seen
         if self.cfg.face_height:
-            level = face_height(world, H, half, round_opening=self.peg == "round")
+            level, seen = face_height(world, H, half, round_opening=self.peg == "round")
+            self.face_seen = seen >= MIN_LEVEL_POINTS
             if level is not None:
                 H = H.copy()
                 H[:3, 3] += level * H[:3, 2]
@@ -286,7 +299,13 @@ class CFVSAgent(Agent):
                 return Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"
             if self.task.dof == 6 and self.cfg.rim_plane:
+                self.face_seen = None  # set by the face's height, when it is measured
                 a, source = self.axis_from_rim(a, pts, tcp)
+                if self.cfg.face_guard and self.face_seen is False and self.had_face:
+                    self.stage = "insert"
+                    self.phase = "fine: no face round OPN's new estimate, insert from the last"
+                    return Action.insert()
+                self.had_face = self.had_face or bool(self.face_seen)
             if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
                 a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
             small = (

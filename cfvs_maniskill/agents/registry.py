@@ -63,7 +63,7 @@ EARLIER_FINE_LOOP = {"tol_translation": 0.0015, "vote_gate": 0.0, "final_correct
 """The fine loop before e_t 1.0 mm, the single-vote steps and the final correction: the
 comparison variants keep it, so their committed records stay what the code does."""
 
-BEFORE_FACE_HEIGHT = {"face_height": False}
+BEFORE_FACE_HEIGHT = {"face_height": False, "face_guard": False}
 """OPN's height for the opening (the agents before session 19): the comparison variants
 keep it, so their committed records stay what the code does; `cfvs_opn_height` is the
 agent they compare with."""
@@ -80,6 +80,8 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs_no_rim": _cfvs("cfvs_no_rim", rim_plane=False),
     # The opening's height as OPN gives it (the agent of session 18).
     "cfvs_opn_height": _cfvs("cfvs_opn_height", **BEFORE_FACE_HEIGHT),
+    # Every fine estimate taken, with or without a face round it (session 19's first change).
+    "cfvs_no_face_guard": _cfvs("cfvs_no_face_guard", face_guard=False),
     # The estimate's position and yaw as OPN gives them, without the opening fit (the
     # agent of session 16).
     "cfvs_no_opening": _cfvs("cfvs_no_opening", opening_fit=False, **BEFORE_FACE_HEIGHT),

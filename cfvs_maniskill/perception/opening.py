@@ -120,19 +120,20 @@ def _fit_once(points: np.ndarray, H: np.ndarray, half: float) -> np.ndarray | No
 
 def face_height(
     points: np.ndarray, frame: np.ndarray, half: float, round_opening: bool = False
-) -> float | None:
-    """How far along `frame`'s z (m) the face round the opening lies from `frame`'s origin
-    (4x4: the estimated opening, z out of the hole along the face's normal): the face's
-    level on the points 1-6 mm outside the opening (`half`: its nominal half width, or
-    radius with `round_opening`); None when too few are seen or they are too noisy to
-    tell the face (FACE_HEIGHT_MAX_NOISE)."""
+) -> tuple[float | None, int]:
+    """(level, seen): how far along `frame`'s z (m) the face round the opening lies from
+    `frame`'s origin (4x4: the estimated opening, z out of the hole along the face's
+    normal), from the `seen` points 1-6 mm outside the opening (`half`: its nominal half
+    width, or radius with `round_opening`); level None when fewer than MIN_LEVEL_POINTS
+    are seen or they are too noisy to tell the face (FACE_HEIGHT_MAX_NOISE)."""
     q = (points - frame[:3, 3]) @ frame[:3, :3]
     r = np.linalg.norm(q[:, :2], axis=1) if round_opening else np.abs(q[:, :2]).max(axis=1)
     near = (r > half + LEVEL_BAND[0]) & (r < half + LEVEL_BAND[1])
-    if np.count_nonzero(near) < MIN_LEVEL_POINTS:
-        return None
+    seen = int(np.count_nonzero(near))
+    if seen < MIN_LEVEL_POINTS:
+        return None, seen
     level, spread = face_level(q[near, 2])
-    return None if spread > FACE_HEIGHT_MAX_NOISE else level
+    return (None if spread > FACE_HEIGHT_MAX_NOISE else level), seen
 
 
 def face_level(h: np.ndarray) -> tuple[float, float]:

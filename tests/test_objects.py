@@ -179,3 +179,20 @@ def test_a_concave_bodys_hole_wall_has_no_seam_and_no_part_in_the_clearance(
         mf.Manifold.hull_points(np.asarray(v, np.float32)).volume() for v, _ in g.collision_parts
     )
     assert hull_vol == pytest.approx(g.visual_trimesh().volume, rel=0.02)
+
+
+def test_mesh_body_helpers_cut_a_watertight_body_and_refuse_an_open_one(tmp_path):
+    """The held-out sets' `make_meshes.py` build bodies with these: a plate less a slot
+    stays watertight and is written beside the script; an open mesh is refused by name."""
+    import trimesh
+    from trimesh.creation import box
+
+    from cfvs_maniskill.objects.meshes import solid, write_bodies
+
+    plate = solid([box([0.2, 0.2, 0.05])], [box([0.22, 0.006, 0.01])])
+    assert plate.is_watertight and plate.volume < 0.2 * 0.2 * 0.05
+    write_bodies({"slotted": plate}, tmp_path)
+    assert trimesh.load(tmp_path / "slotted.stl").is_watertight
+    open_mesh = trimesh.Trimesh(plate.vertices, plate.faces[:-2])
+    with pytest.raises(ValueError, match="open: the mesh body is not watertight"):
+        write_bodies({"open": open_mesh}, tmp_path)

@@ -13,13 +13,9 @@ import trimesh
 from trimesh.creation import box, cylinder
 from trimesh.transformations import translation_matrix as at
 
+from cfvs_maniskill.objects.meshes import solid, write_bodies
+
 HERE = Path(__file__).parent
-
-
-def body(keep, cut=()):
-    """The union of `keep` less the union of `cut` (manifold booleans)."""
-    m = trimesh.boolean.union(list(keep), engine="manifold") if len(keep) > 1 else keep[0]
-    return trimesh.boolean.difference([m, *cut], engine="manifold") if cut else m
 
 
 def prism(radius, sides, height, z0):
@@ -32,12 +28,12 @@ def prism(radius, sides, height, z0):
 
 meshes = {
     # A groove 1.5 cm wide and 1 cm deep, 1.2 cm beyond the hole's edge.
-    "slotted_plate": body(
+    "slotted_plate": solid(
         [box([0.20, 0.16, 0.06], transform=at([0, 0, 0.03]))],
         [box([0.015, 0.20, 0.02], transform=at([0.0445, 0, 0.06]))],
     ),
     # Two round bosses side by side on a plate, the hole in one.
-    "twin_boss": body(
+    "twin_boss": solid(
         [
             box([0.26, 0.14, 0.02], transform=at([0.04, 0, 0.01])),
             cylinder(0.05, 0.04, transform=at([0, 0, 0.04])),
@@ -45,7 +41,7 @@ meshes = {
         ]
     ),
     # A flat ledge with a 30 deg roof rising from 1.5 cm beyond the hole's edge.
-    "sloped_ledge": body(
+    "sloped_ledge": solid(
         [
             box([0.20, 0.14, 0.06], transform=at([0, 0, 0.03])),
             trimesh.convex.convex_hull(
@@ -57,18 +53,15 @@ meshes = {
         ]
     ),
     # The hole in the top of a 5 cm-radius flange pipe 9 cm tall, its flange 4 cm down.
-    "flange_pipe": body(
+    "flange_pipe": solid(
         [
             cylinder(0.05, 0.09, transform=at([0, 0, 0.045])),
             cylinder(0.08, 0.012, transform=at([0, 0, 0.044])),
         ]
     ),
     # A hexagonal boss (across flats 9.5 cm) on a square plate.
-    "hex_boss": body(
+    "hex_boss": solid(
         [box([0.20, 0.20, 0.025], transform=at([0, 0, 0.0125])), prism(0.055, 6, 0.04, 0.024)]
     ),
 }
-for name, mesh in meshes.items():
-    assert mesh.is_watertight, name
-    mesh.export(HERE / f"{name}.stl")
-    print(name, mesh.bounds.round(3).tolist())
+write_bodies(meshes, HERE)

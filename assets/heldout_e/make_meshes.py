@@ -14,15 +14,11 @@ import trimesh
 from trimesh.creation import box, cylinder
 from trimesh.transformations import translation_matrix as at
 
+from cfvs_maniskill.objects.meshes import solid, write_bodies
+
 HERE = Path(__file__).parent
 TILT = np.radians(15.0)
 """The tilted column's top face: this far from level, about y."""
-
-
-def body(keep, cut=()):
-    """The union of `keep` less the union of `cut` (manifold booleans)."""
-    m = trimesh.boolean.union(list(keep), engine="manifold") if len(keep) > 1 else keep[0]
-    return trimesh.boolean.difference([m, *cut], engine="manifold") if cut else m
 
 
 def gusset(x):
@@ -44,19 +40,19 @@ def tilted_column():
     normal = turn[:3, :3] @ [0, 0, 1.0]
     place = at(np.array([0, 0, 0.085]) + 0.1 * normal) @ turn
     cutter.apply_transform(place)
-    return body([column], [cutter])
+    return solid([column], [cutter])
 
 
 meshes = {
     # A plus-shaped body, arms 9 cm wide and 22 cm long, the hole where they cross.
-    "cross_hub": body(
+    "cross_hub": solid(
         [
             box([0.22, 0.09, 0.06], transform=at([0, 0, 0.03])),
             box([0.09, 0.22, 0.06], transform=at([0, 0, 0.03])),
         ]
     ),
     # A plate with a wall behind the hole and two triangular gussets 5 cm either side of it.
-    "gusset_plate": body(
+    "gusset_plate": solid(
         [
             box([0.20, 0.18, 0.05], transform=at([0, 0, 0.025])),
             box([0.20, 0.015, 0.06], transform=at([0, 0.0675, 0.08])),
@@ -65,14 +61,14 @@ meshes = {
         ]
     ),
     # A plate with a round counterbore 4.5 cm in radius and 6 mm deep; the hole opens on its floor.
-    "counterbore_plate": body(
+    "counterbore_plate": solid(
         [box([0.18, 0.18, 0.065], transform=at([0, 0, 0.0325]))],
         [cylinder(0.045, 0.02, sections=96, transform=at([0, 0, 0.069]))],
     ),
     # A round column with its top face tilted 15 deg; the hole square to that face.
     "tilted_column": tilted_column(),
     # A channel: two walls 3.5 cm tall, 8.8 cm apart, the hole on its floor between them.
-    "u_channel": body(
+    "u_channel": solid(
         [
             box([0.22, 0.14, 0.05], transform=at([0, 0, 0.025])),
             box([0.22, 0.012, 0.035], transform=at([0, 0.05, 0.0675])),
@@ -80,7 +76,4 @@ meshes = {
         ]
     ),
 }
-for name, mesh in meshes.items():
-    assert mesh.is_watertight, name
-    mesh.export(HERE / f"{name}.stl")
-    print(name, mesh.bounds.round(3).tolist())
+write_bodies(meshes, HERE)

@@ -10,22 +10,17 @@ at z = 0; every hole at x = y = 0."""
 
 from pathlib import Path
 
-import trimesh
 from trimesh.creation import box, cylinder
 from trimesh.transformations import translation_matrix as at
+
+from cfvs_maniskill.objects.meshes import solid, write_bodies
 
 HERE = Path(__file__).parent
 
 
-def body(keep, cut=()):
-    """The union of `keep` less the union of `cut` (manifold booleans)."""
-    m = trimesh.boolean.union(list(keep), engine="manifold") if len(keep) > 1 else keep[0]
-    return trimesh.boolean.difference([m, *cut], engine="manifold") if cut else m
-
-
 meshes = {
     # Two walls 9 cm tall meeting in a corner, their inner faces 5.5 cm from the hole's axis.
-    "corner_walls": body(
+    "corner_walls": solid(
         [
             box([0.20, 0.20, 0.05], transform=at([0, 0, 0.025])),
             box([0.015, 0.20, 0.09], transform=at([0.0625, 0, 0.095])),
@@ -33,14 +28,14 @@ meshes = {
         ]
     ),
     # A round post 5 cm across and 12 cm tall, its side 5 cm from the hole's axis.
-    "tall_post": body(
+    "tall_post": solid(
         [
             box([0.20, 0.18, 0.05], transform=at([0, 0, 0.025])),
             cylinder(0.025, 0.12, sections=64, transform=at([0, 0.075, 0.11])),
         ]
     ),
     # A slot 12 cm wide between walls 8 cm tall; the hole on its floor.
-    "deep_slot": body(
+    "deep_slot": solid(
         [
             box([0.22, 0.16, 0.05], transform=at([0, 0, 0.025])),
             box([0.22, 0.02, 0.08], transform=at([0, 0.07, 0.09])),
@@ -49,21 +44,18 @@ meshes = {
     ),
     # A 6 x 6 cm tower 11 cm tall off the hole's diagonal, its near corner 4 cm out on x
     # and 3.5 cm on y.
-    "corner_tower": body(
+    "corner_tower": solid(
         [
             box([0.20, 0.20, 0.05], transform=at([0, 0, 0.025])),
             box([0.06, 0.06, 0.11], transform=at([0.07, 0.065, 0.105])),
         ]
     ),
     # A ledge 1.5 cm high whose edge runs 1.2 cm beyond the opening on one side.
-    "step_ledge": body(
+    "step_ledge": solid(
         [
             box([0.20, 0.18, 0.05], transform=at([0, 0, 0.025])),
             box([0.063, 0.18, 0.015], transform=at([0.0685, 0, 0.0575])),
         ]
     ),
 }
-for name, mesh in meshes.items():
-    assert mesh.is_watertight, name
-    mesh.export(HERE / f"{name}.stl")
-    print(name, mesh.bounds.round(3).tolist())
+write_bodies(meshes, HERE)

@@ -11,33 +11,30 @@ every hole at x = y = 0 (the hole itself is cut by the hole library from the .ya
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from trimesh.creation import box, cylinder
 from trimesh.transformations import rotation_matrix
 from trimesh.transformations import translation_matrix as at
 
+from cfvs_maniskill.objects.meshes import solid, write_bodies
+
 HERE = Path(__file__).parent
-
-
-def body(keep, cut=()):
-    """The union of `keep` less the union of `cut` (manifold booleans)."""
-    m = trimesh.boolean.union(list(keep), engine="manifold") if len(keep) > 1 else keep[0]
-    return trimesh.boolean.difference([m, *cut], engine="manifold") if cut else m
 
 
 plate = box([0.20, 0.20, 0.05], transform=at([0, 0, 0.025]))
 meshes = {
     # A round boss 8 cm across and 2.5 cm tall: its edge 4.6 mm beyond the square
     # opening's corners (4 mm clearance), 15 mm beyond its sides.
-    "raised_boss": body([plate, cylinder(0.040, 0.025, sections=96, transform=at([0, 0, 0.0625]))]),
+    "raised_boss": solid(
+        [plate, cylinder(0.040, 0.025, sections=96, transform=at([0, 0, 0.0625]))]
+    ),
     # A bar 6.2 cm wide (8 mm of face either side of the opening), 6 cm tall, 24 cm long,
     # standing on its own.
-    "narrow_bar": body([box([0.24, 0.062, 0.06], transform=at([0, 0, 0.03]))]),
+    "narrow_bar": solid([box([0.24, 0.062, 0.06], transform=at([0, 0, 0.03]))]),
     # An annular groove 8 mm wide and 4 mm deep, 1.7 cm beyond the opening's sides.
-    "grooved_face": body(
+    "grooved_face": solid(
         [plate],
         [
-            body(
+            solid(
                 [cylinder(0.048, 0.008, sections=96, transform=at([0, 0, 0.05]))],
                 [cylinder(0.040, 0.010, sections=96, transform=at([0, 0, 0.05]))],
             )
@@ -45,7 +42,7 @@ meshes = {
     ),
     # The face ends 1.2 cm beyond one side of the opening in a 45 deg bevel down to the
     # bottom.
-    "bevel_edge": body(
+    "bevel_edge": solid(
         [plate],
         [
             box(
@@ -57,7 +54,7 @@ meshes = {
         ],
     ),
     # Four round holes 1.2 cm across and 2.5 cm deep, 5 cm from the hole's axis.
-    "perforated_plate": body(
+    "perforated_plate": solid(
         [plate],
         [
             cylinder(0.006, 0.05, sections=48, transform=at([x, y, 0.05]))
@@ -65,7 +62,4 @@ meshes = {
         ],
     ),
 }
-for name, mesh in meshes.items():
-    assert mesh.is_watertight, name
-    mesh.export(HERE / f"{name}.stl")
-    print(name, mesh.bounds.round(3).tolist())
+write_bodies(meshes, HERE)

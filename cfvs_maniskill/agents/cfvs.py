@@ -256,8 +256,8 @@ class CFVSAgent(Agent):
         where = "OPN position" if seen is None else "centre from the opening"
         H = H if seen is None else seen
         if self.cfg.face_height:
-            level, seen = face_height(world, H, half, round_opening=self.peg == "round")
-            self.face_seen = seen >= MIN_LEVEL_POINTS
+            level, ring_points = face_height(world, H, half, round_opening=self.peg == "round")
+            self.face_seen = ring_points >= MIN_LEVEL_POINTS
             if level is not None:
                 H = H.copy()
                 H[:3, 3] += level * H[:3, 2]

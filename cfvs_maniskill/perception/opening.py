@@ -98,11 +98,8 @@ def fit_opening(
 def _fit_once(points: np.ndarray, H: np.ndarray, half: float) -> np.ndarray | None:
     q = (points - H[:3, 3]) @ H[:3, :3]  # the estimate's frame: x, y in the face, z out
     r = np.abs(q[:, :2]).max(axis=1)
-    near = (r > half + LEVEL_BAND[0]) & (r < half + LEVEL_BAND[1])
-    if np.count_nonzero(near) < MIN_LEVEL_POINTS:
-        return None
-    level, spread = face_level(q[near, 2])
-    if spread > MAX_NOISE:
+    level, spread, _ = _ring_level(q[:, 2], r, half)
+    if level is None or spread > MAX_NOISE:
         return None
     band = max(MIN_DEPTH_BAND, 4.0 * spread)
     face = q[(np.abs(q[:, 2] - level) < band) & (r < half + SEARCH)]
@@ -128,12 +125,22 @@ def face_height(
     are seen or they are too noisy to tell the face (FACE_HEIGHT_MAX_NOISE)."""
     q = (points - frame[:3, 3]) @ frame[:3, :3]
     r = np.linalg.norm(q[:, :2], axis=1) if round_opening else np.abs(q[:, :2]).max(axis=1)
+    level, spread, seen = _ring_level(q[:, 2], r, half)
+    if level is None or spread > FACE_HEIGHT_MAX_NOISE:
+        return None, seen
+    return level, seen
+
+
+def _ring_level(heights: np.ndarray, r: np.ndarray, half: float):
+    """(level, noise sigma, points) of the face on the points whose distance `r` from the
+    estimated centre (in the face's plane) is 1-6 mm outside the opening (LEVEL_BAND), from
+    their `heights` along the axis; level and sigma None when fewer than MIN_LEVEL_POINTS."""
     near = (r > half + LEVEL_BAND[0]) & (r < half + LEVEL_BAND[1])
     seen = int(np.count_nonzero(near))
     if seen < MIN_LEVEL_POINTS:
-        return None, seen
-    level, spread = face_level(q[near, 2])
-    return (None if spread > FACE_HEIGHT_MAX_NOISE else level), seen
+        return None, None, seen
+    level, spread = face_level(heights[near])
+    return level, spread, seen
 
 
 def face_level(h: np.ndarray) -> tuple[float, float]:

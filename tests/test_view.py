@@ -46,9 +46,7 @@ def _poses(H: np.ndarray, first_x: np.ndarray) -> list[np.ndarray]:
     tool = G.make(G.frame_with_z(-H[:3, 2], first_x), np.zeros(3))
     poses = approach_yaws(insertion_pose("square", H, -PRE_INSERT_HEIGHT, tool), first_x)
     x, y = poses[0][:3, 0], poses[0][:3, 1]  # the order these tests' indices assume
-    assert [np.allclose(P[:3, 0], a) for P, a in zip(poses, (x, y, -y, -x), strict=True)] == [
-        True
-    ] * 4
+    assert all(np.allclose(P[:3, 0], a) for P, a in zip(poses, (x, y, -y, -x), strict=True))
     return poses
 
 

@@ -166,13 +166,11 @@ class CFVSAgent(Agent):
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
-        self.face_seen: bool | None = None
         self.had_face = False
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
-        # Whether the face round the opening was seen at the latest / any fine estimate.
-        self.face_seen, self.had_face = None, False
+        self.had_face = False  # whether any fine estimate had its face seen round it
         self.phase, self.estimate = "", None
         # Point subsets are random; seeded from the episode's seed, the same env seed gives
         # the same episode.
@@ -223,11 +221,12 @@ class CFVSAgent(Agent):
 
     def axis_from_rim(
         self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray
-    ) -> tuple[np.ndarray, str]:
+    ) -> tuple[np.ndarray, str, bool | None]:
         """OPN's offset `a` with the hole's axis replaced by the normal of the face around
         the opening it points at (and, with `opening_fit`, its centre and a square's yaw by
-        the opening seen on that face), and where the offset came from; (a, "OPN offset")
-        when the ring gives no face."""
+        the opening seen on that face; with `face_height`, its height), where the offset
+        came from, and whether the face was seen round the opening (None: not measured);
+        (a, "OPN offset", None) when the ring gives no face."""
         T = L.apply_action(tcp, a)
         H = L.hole_frame_from_pre_insertion(T)
         world = tool_to_world(pts, tcp)
@@ -248,22 +247,23 @@ class CFVSAgent(Agent):
             narrow_first=self.cfg.rim_narrow_ring,
         )
         if n is None:
-            return a, "OPN offset"
+            return a, "OPN offset", None
         H = align_axis(H, n)
         seen = None
         if self.cfg.opening_fit and self.peg == "square":
             seen = fit_opening(world, H, half)
         where = "OPN position" if seen is None else "centre from the opening"
         H = H if seen is None else seen
+        face_seen = None
         if self.cfg.face_height:
             level, ring_points = face_height(world, H, half, round_opening=self.peg == "round")
-            self.face_seen = ring_points >= MIN_LEVEL_POINTS
+            face_seen = ring_points >= MIN_LEVEL_POINTS
             if level is not None:
                 H = H.copy()
                 H[:3, 3] += level * H[:3, 2]
                 where += ", height from the face"
         pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
-        return L.fine_action(tcp, pose), f"axis from the rim, {where}"
+        return L.fine_action(tcp, pose), f"axis from the rim, {where}", face_seen
 
     def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
         """The pre-insertion pose over hole frame `H`: at the yaw nearest the tool's own or,
@@ -299,13 +299,12 @@ class CFVSAgent(Agent):
                 return Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"
             if self.task.dof == 6 and self.cfg.rim_plane:
-                self.face_seen = None  # set by the face's height, when it is measured
-                a, source = self.axis_from_rim(a, pts, tcp)
-                if self.cfg.face_guard and self.face_seen is False and self.had_face:
+                a, source, face_seen = self.axis_from_rim(a, pts, tcp)
+                if self.cfg.face_guard and face_seen is False and self.had_face:
                     self.stage = "insert"
                     self.phase = "fine: no face round OPN's new estimate, insert from the last"
                     return Action.insert()
-                self.had_face = self.had_face or bool(self.face_seen)
+                self.had_face = self.had_face or bool(face_seen)
             if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
                 a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
             small = (

@@ -22,14 +22,17 @@ from cfvs_maniskill.objects.meshes import solid, write_bodies
 HERE = Path(__file__).parent
 
 
-def frustum(top: float, bottom: float, z_top: float, depth: float) -> trimesh.Trimesh:
-    """A square frustum `top` wide at z_top narrowing to `bottom` wide `depth` below it."""
+def chamfer_ring(top: float, bottom: float, z_top: float, depth: float) -> trimesh.Trimesh:
+    """A square frustum `top` wide at z_top narrowing to `bottom` wide `depth` below it, less
+    its `bottom`-wide core: cut from a body it chamfers the entry of any opening wider than
+    `bottom` and leaves the face at the hole's origin (the hole library cuts the core)."""
     corners = [(sx, sy) for sx in (-0.5, 0.5) for sy in (-0.5, 0.5)]
     pts = [(top * x, top * y, z_top) for x, y in corners]
     pts += [(bottom * x, bottom * y, z_top - depth) for x, y in corners]
     # A slab above the face so the cut opens through it cleanly.
     pts += [(top * x, top * y, z_top + 0.01) for x, y in corners]
-    return trimesh.Trimesh(vertices=np.array(pts)).convex_hull
+    hull = trimesh.Trimesh(vertices=np.array(pts)).convex_hull
+    return solid([hull], [box([bottom, bottom, 0.03], transform=at([0, 0, z_top]))])
 
 
 meshes = {
@@ -52,9 +55,10 @@ meshes = {
     # (1 mm clearance) opening's sides 2.5 mm down.
     "chamfered_entry": solid(
         [box([0.20, 0.20, 0.05], transform=at([0, 0, 0.025]))],
-        [frustum(0.052, 0.046, 0.05, 0.003)],
+        [chamfer_ring(0.052, 0.046, 0.05, 0.003)],
     ),
-    # A counterbore 6.2 cm square and 1.5 mm deep round the opening.
+    # A counterbore 6.2 cm square and 1.5 mm deep round the opening: the hole opens on
+    # its floor (the .yaml's origin).
     "counterbored": solid(
         [box([0.20, 0.20, 0.05], transform=at([0, 0, 0.025]))],
         [box([0.062, 0.062, 0.0115], transform=at([0, 0, 0.0485 + 0.00575]))],

@@ -6,33 +6,18 @@ Written in session 20 before any episode on them and before that session's chang
 tight-fit tasks' contact generation was committed: its clean check. Bodies and entries a
 machined part has that no earlier set has: a hexagonal prism and a round disc with the hole
 off-centre near their edge, a cross-shaped body whose re-entrant corners are 1 cm from the
-opening, a 45 deg chamfer round the opening's entry, a shallow counterbore. Metres, bottom
-at z = 0; every hole at x = y = 0 (the hole itself is cut by the hole library from the
+opening, a notch through the body 8 mm from the opening, a shallow counterbore. Metres,
+bottom at z = 0; every hole at x = y = 0 (the hole itself is cut by the hole library from the
 .yaml)."""
 
 from pathlib import Path
 
-import numpy as np
-import trimesh
 from trimesh.creation import box, cylinder
 from trimesh.transformations import translation_matrix as at
 
 from cfvs_maniskill.objects.meshes import solid, write_bodies
 
 HERE = Path(__file__).parent
-
-
-def chamfer_ring(top: float, bottom: float, z_top: float, depth: float) -> trimesh.Trimesh:
-    """A square frustum `top` wide at z_top narrowing to `bottom` wide `depth` below it, less
-    its `bottom`-wide core: cut from a body it chamfers the entry of any opening wider than
-    `bottom` and leaves the face at the hole's origin (the hole library cuts the core)."""
-    corners = [(sx, sy) for sx in (-0.5, 0.5) for sy in (-0.5, 0.5)]
-    pts = [(top * x, top * y, z_top) for x, y in corners]
-    pts += [(bottom * x, bottom * y, z_top - depth) for x, y in corners]
-    # A slab above the face so the cut opens through it cleanly.
-    pts += [(top * x, top * y, z_top + 0.01) for x, y in corners]
-    hull = trimesh.Trimesh(vertices=np.array(pts)).convex_hull
-    return solid([hull], [box([bottom, bottom, 0.03], transform=at([0, 0, z_top]))])
 
 
 meshes = {
@@ -51,11 +36,11 @@ meshes = {
             box([0.07, 0.22, 0.05], transform=at([0, 0, 0.025])),
         ]
     ),
-    # A 45 deg chamfer round the entry, 5.2 cm wide at the face: it meets a 4.7 cm
-    # (1 mm clearance) opening's sides 2.5 mm down.
-    "chamfered_entry": solid(
+    # A notch 1.5 cm wide cut through the body's full height from one edge, its end 8 mm
+    # from the opening's side.
+    "notched_block": solid(
         [box([0.20, 0.20, 0.05], transform=at([0, 0, 0.025]))],
-        [chamfer_ring(0.052, 0.046, 0.05, 0.003)],
+        [box([0.08, 0.015, 0.06], transform=at([0.073, 0, 0.025]))],
     ),
     # A counterbore 6.2 cm square and 1.5 mm deep round the opening: the hole opens on
     # its floor (the .yaml's origin).

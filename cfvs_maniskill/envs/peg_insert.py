@@ -191,11 +191,14 @@ class PegInsertEnv(BaseEnv):
         # A 2 mm contact offset (ManiSkill's default is 20 mm): with 20 mm, PhysX's
         # speculative contacts between the peg's bottom face and the hole's rim pushed back
         # a perfectly centred peg; a 2 mm offset still catches 10 mm/s at 500 Hz.
-        # Tight-fit tasks switch PCM off (TaskConfig.pcm says why).
+        # Tight-fit tasks use 0.5 mm and switch PCM off (TaskConfig.contact_offset and
+        # TaskConfig.pcm say why).
         return SimConfig(
             sim_freq=500,
             control_freq=20,
-            scene_config=SceneConfig(contact_offset=0.002, enable_pcm=self.task.pcm),
+            scene_config=SceneConfig(
+                contact_offset=self.task.contact_offset, enable_pcm=self.task.pcm
+            ),
         )
 
     @property

@@ -55,6 +55,7 @@ def test_tight_task_files():
         ("contact_offset: 0", "contact_offset"),
         ("contact_offset: 0.05", "contact_offset"),
         ("contact_offset: 2mm", "expected a number"),
+        ("clearance: 0.0005", "expected contact_offset <= 0.00025 m"),  # the 2 mm default
     ],
 )
 def test_bad_tight_fields_name_the_field(tmp_path, line, words):

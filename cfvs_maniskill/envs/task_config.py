@@ -144,6 +144,16 @@ def load_task(path: Path) -> TaskConfig:
             f"expected 0 < contact_offset <= 0.02 m (PhysX needs one above 0), "
             f"got {cfg.contact_offset}",
         )
+    if cfg.contact_offset > cfg.clearance / 2:
+        # Measured at 0.5 mm clearance: 0.5 mm and 2 mm offsets stalled centred pegs in the
+        # entry, 0.2 mm did not (TaskConfig.contact_offset).
+        raise TaskConfigError(
+            path,
+            "contact_offset",
+            f"{cfg.contact_offset} m is more than half the clearance ({cfg.clearance} m): "
+            f"expected contact_offset <= {cfg.clearance / 2:g} m, or PhysX holds pegs "
+            f"centred in the hole's entry on contacts across the play",
+        )
     return cfg
 
 

@@ -9,12 +9,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, SENSORS_DIR
 from cfvs_maniskill.robots.ur5 import CAMERA_UID, camera_pose_in_tool
 from cfvs_maniskill.sensing.depth import apply_stereo, discontinuity_jump, edge_mask, grid_points
+from cfvs_maniskill.sensing.floor import (
+    camera_in_tip,
+    floor_samples,
+    hand_eye_residual,
+    pre_insertion_hole,
+)
 from cfvs_maniskill.sensing.model import SAPIEN_CAM_TO_GL, mount_error
 from cfvs_maniskill.sensing.profile import (
     SensorProfileError,
@@ -313,3 +320,23 @@ def test_table_removal_follows_the_measured_noise(noise):
     assert (fit.height(table) > fit.margin).mean() < 1e-3
     kept = fit.height(box) > fit.margin
     assert kept[box[:, 2] > 0.002 + 8 * noise + 0.003].all()
+
+
+def test_hand_eye_floor_is_the_mount_error_seen_at_the_hole():
+    """The residual a perfect hole estimator leaves under a mount error: none without one,
+    a translation's part across the tool axis, a turn's angle as tilt, and never more than
+    the translation plus the turn times the camera's distance to the hole."""
+    assert np.allclose(hand_eye_residual(np.eye(4)), (0.0, 0.0), atol=1e-9)
+    C = camera_in_tip()
+    t = np.array([0.001, -0.0005, 0.002])  # in the camera's frame
+    along = C[:3, :3] @ t  # in the tip frame
+    lateral, tilt = hand_eye_residual(G.make(np.eye(3), t))
+    assert lateral == pytest.approx(np.linalg.norm(along[:2]), abs=1e-9) and tilt < 1e-6
+    # A turn about the camera's centre by 1 deg about an axis across the tool's z.
+    axis = np.linalg.solve(C[:3, :3], np.array([1.0, 0.0, 0.0]))
+    R = Rotation.from_rotvec(np.radians(1.0) * axis).as_matrix()
+    assert hand_eye_residual(G.make(R, np.zeros(3)))[1] == pytest.approx(1.0, abs=1e-6)
+    lever = np.linalg.norm(pre_insertion_hole()[:3, 3] - C[:3, 3])
+    s = floor_samples(0.0015, 0.5, 500, seed=1)
+    assert np.all(s[:, 0] <= 0.0015 + np.radians(0.5) * lever + 1e-9)
+    assert np.all(s[:, 1] <= 0.5 + 1e-6) and s[:, 0].max() > 0.0015

@@ -13,13 +13,14 @@ the true hole is H = C M C^-1 D."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 import tyro
+from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill.constants import PEG_LENGTH, PRE_INSERT_HEIGHT
-from cfvs_maniskill.sensing.model import mount_error
 from cfvs_maniskill.sensing.profile import load_profile
 
 
@@ -40,26 +41,48 @@ def pre_insertion_hole() -> np.ndarray:
     return D
 
 
-def hand_eye_residual(mount: np.ndarray) -> tuple[float, float]:
-    """(lateral m, tilt deg) of the true hole from the tip when the believed one is at the
-    pre-insertion pose: the tip's distance from the true axis and the angle between axes
-    (what episode.pose_residual measures)."""
+def hand_eye_residuals(mounts: np.ndarray) -> np.ndarray:
+    """(n, 2): lateral m and tilt deg of the true hole from the tip for (n, 4, 4) mount
+    errors, when the believed hole is at the pre-insertion pose: the tip's distance from the
+    true axis and the angle between the axes (what episode.pose_residual measures)."""
     C = camera_in_tip()
     # The exact inverse: SAPIEN's float32 pose is orthonormal to 1e-7 only (0.03 deg).
-    H = C @ mount @ np.linalg.inv(C) @ pre_insertion_hole()
-    z, d = H[:3, 2], -H[:3, 3]
-    lateral = float(np.linalg.norm(d - (d @ z) * z))
-    tilt = float(np.degrees(np.arctan2(np.hypot(z[0], z[1]), -z[2])))  # exact near 0
-    return lateral, tilt
+    H = C @ mounts @ np.linalg.inv(C) @ pre_insertion_hole()
+    z, d = H[:, :3, 2], -H[:, :3, 3]
+    lateral = np.linalg.norm(d - np.sum(d * z, axis=1, keepdims=True) * z, axis=1)
+    tilt = np.degrees(np.arctan2(np.hypot(z[:, 0], z[:, 1]), -z[:, 2]))  # exact near 0
+    return np.stack([lateral, tilt], axis=1)
+
+
+def hand_eye_residual(mount: np.ndarray) -> tuple[float, float]:
+    """hand_eye_residuals for one mount error."""
+    lateral, tilt = hand_eye_residuals(np.asarray(mount)[None])[0]
+    return float(lateral), float(tilt)
 
 
 def floor_samples(translation: float, rotation_deg: float, n: int, seed: int) -> np.ndarray:
     """(n, 2) residuals (lateral m, tilt deg) over mount errors of exactly these sizes in
-    random directions, drawn as the env draws them."""
-    rng = np.random.default_rng(seed)
-    return np.array(
-        [hand_eye_residual(mount_error(translation, rotation_deg, rng)) for _ in range(n)]
-    )
+    uniformly random directions, as sensing.model.mount_error draws them."""
+    v = np.random.default_rng(seed).standard_normal((n, 2, 3))
+    v /= np.linalg.norm(v, axis=2, keepdims=True)
+    mounts = np.tile(np.eye(4), (n, 1, 1))
+    mounts[:, :3, :3] = Rotation.from_rotvec(np.radians(rotation_deg) * v[:, 0]).as_matrix()
+    mounts[:, :3, 3] = translation * v[:, 1]
+    return hand_eye_residuals(mounts)
+
+
+@functools.cache
+def floor_p90(sensor: str, samples: int = 20000) -> tuple[float, float] | None:
+    """(lateral mm, tilt deg) p90 of a profile's hand-eye floor; None without a hand-eye
+    error or for a sensor name that is not a loadable profile (old records)."""
+    try:
+        he = load_profile(sensor).hand_eye
+    except (OSError, ValueError):
+        return None
+    if he.translation == 0 and he.rotation_deg == 0:
+        return None
+    s = floor_samples(he.translation, he.rotation_deg, samples, seed=0)
+    return float(1000 * np.percentile(s[:, 0], 90)), float(np.percentile(s[:, 1], 90))
 
 
 @dataclass

@@ -13,7 +13,9 @@ the oracle made 2/10 at 0.5 mm). Here instead, every control step:
   force - so the hole's rim and walls turn and centre the peg (a remote-centre-compliance
   device emulated in software; on the rim this lays the peg's face flat on it);
 * on the rim, a slow spiral search from the centre whose pitch is below what the peg can
-  enter by (its chamfer + half the clearance), so no entry point is skipped;
+  enter by (its chamfer + half the clearance), so no entry point is skipped; there the
+  commanded pose turns at most 1 deg from the start (enough to lay the face flat), so a
+  peg resting partly over the opening does not tilt towards it while it searches;
 * passing the rim (the tip in the opening, the full section reaching the rim's edge): a
   tilted peg's low side slides in against the wall while its high side's chamfer rests on
   the opposite edge. With contact forces split per contact (which no sensor measures) the
@@ -77,6 +79,13 @@ class ForceInsertConfig:
     """Largest turn of the commanded pose away from the start pose, rad (the fine stage
     leaves 2.2 deg of tilt at p90; a peg still on the rim but taken to be passing it turns
     towards its load without end otherwise: measured, 10-45 deg tilts)."""
+    max_rim_correction: float = np.radians(1.0)
+    """The same bound while the tip is on the rim (and searching there), rad. Enough to lay
+    the face flat on it (the fine stage leaves 0.27 / 0.57 deg of tilt at p90, ideal /
+    realistic); more let a peg resting partly over the opening tilt towards it while the
+    spiral dragged it about, and it reached the opening 3.6 deg askew and jammed 3 mm in
+    (most 0.5 mm failures under `realistic`, where the hand-eye error leaves 2 mm to
+    search)."""
     contact_force: float = 1.0
     """A tared reading above this (N) is the first touch (well above the sensor noise of
     the shipped profiles: 0.1 N per axis)."""
@@ -219,7 +228,8 @@ def force_insert(
         if n > fcfg.max_rot_step:
             w *= fcfg.max_rot_step / n
         R = Rotation.from_rotvec(w).as_matrix() @ C[:3, :3]
-        if G.rot_angle(start[:3, :3].T @ R) <= fcfg.max_correction:
+        bound = fcfg.max_rim_correction if phase is Phase.RIM else fcfg.max_correction
+        if G.rot_angle(start[:3, :3].T @ R) <= bound:
             centre = _turn_about_tip(C, centre, cmd, R)
         z = C[:3, 2]
         done = float((env.tcp_matrix()[:3, 3] - origin) @ z)

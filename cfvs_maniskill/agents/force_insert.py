@@ -76,9 +76,10 @@ class ForceInsertConfig:
     estimated entry instead, a 1-2 mm error in the hole's height sent pegs on the rim into
     it: measured, 1 mm success 0.915 / 0.900 -> 0.880 / 0.845.)"""
     max_correction: float = np.radians(3.0)
-    """Largest turn of the commanded pose away from the start pose, rad (the fine stage
-    leaves 2.2 deg of tilt at p90; a peg still on the rim but taken to be passing it turns
-    towards its load without end otherwise: measured, 10-45 deg tilts)."""
+    """Largest turn of the commanded pose away from the start pose once passing the rim or
+    in the hole, rad (set when the fine stage left 2.2 deg of tilt at p90; a peg still on
+    the rim but taken to be passing it turns towards its load without end otherwise:
+    measured, 10-45 deg tilts)."""
     max_rim_correction: float = np.radians(1.0)
     """The same bound while the tip is on the rim (and searching there), rad. Enough to lay
     the face flat on it (the fine stage leaves 0.27 / 0.57 deg of tilt at p90, ideal /

@@ -191,8 +191,8 @@ class PegInsertEnv(BaseEnv):
         # A 2 mm contact offset (ManiSkill's default is 20 mm): with 20 mm, PhysX's
         # speculative contacts between the peg's bottom face and the hole's rim pushed back
         # a perfectly centred peg; a 2 mm offset still catches 10 mm/s at 500 Hz.
-        # Tight-fit tasks use 0.5 mm and switch PCM off (TaskConfig.contact_offset and
-        # TaskConfig.pcm say why).
+        # Tight-fit tasks use 0.2 mm, below their play per side, and switch PCM off
+        # (TaskConfig.contact_offset and TaskConfig.pcm say why).
         return SimConfig(
             sim_freq=500,
             control_freq=20,

@@ -86,7 +86,9 @@ class ForceInsertConfig:
     realistic); more let a peg resting partly over the opening tilt towards it while the
     spiral dragged it about, and it reached the opening 3.6 deg askew and jammed 3 mm in
     (most 0.5 mm failures under `realistic`, where the hand-eye error leaves 2 mm to
-    search)."""
+    search). It counts the whole turn, yaw included, so a peg arriving over 1 deg off in
+    yaw cannot square itself on the rim (traced with OPN's yaw, `cfvs_no_opening`);
+    bounding the tilt alone is the next change (docs/tight-fits.md)."""
     contact_force: float = 1.0
     """A tared reading above this (N) is the first touch (well above the sensor noise of
     the shipped profiles: 0.1 N per axis)."""

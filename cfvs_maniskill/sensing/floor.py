@@ -18,9 +18,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import tyro
-from scipy.spatial.transform import Rotation
 
-from cfvs_maniskill.constants import PEG_LENGTH, PRE_INSERT_HEIGHT
+from cfvs_maniskill.agents.interface import flange_pose
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+from cfvs_maniskill.sensing.model import mount_errors
 from cfvs_maniskill.sensing.profile import load_profile
 
 
@@ -28,9 +29,8 @@ def camera_in_tip() -> np.ndarray:
     """The wrist camera's nominal mount (SAPIEN camera frame) in the peg-tip frame."""
     from cfvs_maniskill.robots.ur5 import camera_pose_in_tool
 
-    C = np.asarray(camera_pose_in_tool().to_transformation_matrix(), dtype=np.float64)
-    C[2, 3] -= PEG_LENGTH  # tool0 -> the tip, PEG_LENGTH along the tool's z
-    return C
+    tool0 = flange_pose(np.eye(4))  # the flange in the tip frame
+    return tool0 @ np.asarray(camera_pose_in_tool().to_transformation_matrix(), np.float64)
 
 
 def pre_insertion_hole() -> np.ndarray:
@@ -62,12 +62,8 @@ def hand_eye_residual(mount: np.ndarray) -> tuple[float, float]:
 
 def floor_samples(translation: float, rotation_deg: float, n: int, seed: int) -> np.ndarray:
     """(n, 2) residuals (lateral m, tilt deg) over mount errors of exactly these sizes in
-    uniformly random directions, as sensing.model.mount_error draws them."""
-    v = np.random.default_rng(seed).standard_normal((n, 2, 3))
-    v /= np.linalg.norm(v, axis=2, keepdims=True)
-    mounts = np.tile(np.eye(4), (n, 1, 1))
-    mounts[:, :3, :3] = Rotation.from_rotvec(np.radians(rotation_deg) * v[:, 0]).as_matrix()
-    mounts[:, :3, 3] = translation * v[:, 1]
+    random directions, drawn by the env's own `mount_errors`."""
+    mounts = mount_errors(translation, rotation_deg, np.random.default_rng(seed), n)
     return hand_eye_residuals(mounts)
 
 

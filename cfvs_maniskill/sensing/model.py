@@ -25,16 +25,24 @@ _HAND_EYE, _WRENCH_BIAS, _WRENCH_NOISE, _DEPTH = 1, 2, 3, 4
 """Stream tags: each kind of draw has its own generator."""
 
 
-def _unit(rng: np.random.Generator) -> np.ndarray:
-    v = rng.standard_normal(3)
-    return v / np.linalg.norm(v)
+def mount_errors(
+    translation: float, rotation_deg: float, rng: np.random.Generator, n: int
+) -> np.ndarray:
+    """(n, 4, 4) rigid transforms, each moving by exactly `translation` m and turning by
+    exactly `rotation_deg`, in uniformly random directions (per transform: the turn's
+    direction, then the move's, three normal draws each)."""
+    v = rng.standard_normal((n, 2, 3))
+    v /= np.linalg.norm(v, axis=2, keepdims=True)
+    M = np.tile(np.eye(4), (n, 1, 1))
+    M[:, :3, :3] = Rotation.from_rotvec(np.radians(rotation_deg) * v[:, 0]).as_matrix()
+    M[:, :3, 3] = translation * v[:, 1]
+    return M
 
 
 def mount_error(translation: float, rotation_deg: float, rng: np.random.Generator) -> np.ndarray:
-    """A rigid 4x4 transform moving by exactly `translation` m and turning by exactly
-    `rotation_deg`, in random directions."""
-    R = Rotation.from_rotvec(np.radians(rotation_deg) * _unit(rng)).as_matrix()
-    return G.make(R, translation * _unit(rng))
+    """One of `mount_errors`: a rigid 4x4 transform moving by exactly `translation` m and
+    turning by exactly `rotation_deg`, in random directions."""
+    return mount_errors(translation, rotation_deg, rng, 1)[0]
 
 
 class SensorModel:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -9,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cfvs_maniskill import provenance
 from cfvs_maniskill.agents.base import Agent, Observation
 from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import robot_view
@@ -35,12 +37,24 @@ class EpisodeResult:
     wall_time_s: float
     sensor: str = "ideal"
     """The sensor profile the episode ran under."""
+    provenance: dict = field(default_factory=dict)
+    """Which code, weights, sensor profile, task and object files made it (provenance.py)."""
     move_residuals: list = field(default_factory=list)
     """After each of the agent's moves, the true error from the pre-insertion pose:
     [lateral mm, tilt deg] (measured by the runner from true poses; agents never see it)."""
 
     def to_json(self) -> dict:
         return asdict(self)
+
+
+AGENT_SEED_SALT = b"cfvs_maniskill agent seed v1"
+
+
+def agent_seed(episode_seed: int) -> int:
+    """The seed an agent is reset with: a salted hash of the episode's seed. The env's own
+    seed fixes the scene and the mount error, so an agent handed it could replay them."""
+    digest = hashlib.blake2b(str(episode_seed).encode(), digest_size=8, key=AGENT_SEED_SALT)
+    return int.from_bytes(digest.digest(), "little") & 0x7FFFFFFF
 
 
 def failure_reason(m: dict, depth: float) -> str:
@@ -96,7 +110,7 @@ def run_episode(
     t0 = time.perf_counter()
     u = env.unwrapped
     obs, _ = env.reset(seed=seed, options=options or {})
-    agent.reset(seed)
+    agent.reset(agent_seed(seed))
     executor.reset()
     executor.on_step = None if film is None else film.on_step
     if film is not None:
@@ -154,5 +168,6 @@ def run_episode(
         lateral_offset_m=round(clean["lateral_offset"], 5),
         wall_time_s=round(time.perf_counter() - t0, 3),
         sensor=u.sensor_profile.name,
+        provenance=provenance.of_episode(env, getattr(agent, "weights", {})),
         move_residuals=residuals,
     )

@@ -27,6 +27,7 @@ from cfvs_maniskill.nets.checkpoint import (
     build,
     file_sha256,
     load_weights,
+    safe_load,
     save_atomic,
     write_weights,
 )
@@ -118,7 +119,11 @@ def resume_state(args, sha, free: tuple[str, ...]) -> tuple[Path, dict, dict | N
     key = {k: str(v) for k, v in dataclasses.asdict(args).items() if k not in free}
     if not path.exists():
         return path, key, None
-    blob = torch.load(path, map_location="cpu", weights_only=False)
+    blob = safe_load(path, DatasetError)
+    if not isinstance(blob, dict) or "run_key" not in blob:
+        raise DatasetError(
+            f"{path}: not a resume state of this trainer; delete it or use another --out"
+        )
     if blob["run_key"] != key or blob["data_sha256"] != sha:
         raise DatasetError(
             f"{path}: a resume state from other arguments or data; delete it or use another --out"

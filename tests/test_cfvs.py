@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 from pathlib import Path
@@ -18,6 +19,8 @@ from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
 from cfvs_maniskill.nets.oakn import weighted_keypoints
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import fine_crop, object_points, sample_fixed
+
+from .conftest import run_cli
 
 REFERENCE = Path(__file__).parent / "data" / "cfvs_reference.npz"
 """A real 6-DoF wrist cloud and the shipped networks' outputs on it. Regenerate after
@@ -90,11 +93,54 @@ def test_bad_weights_files_are_named(tmp_path):
         load_weights(files["oakn"], "oakn", "round")
     other = tmp_path / "other.pt"
     shutil.copy(files["oakn"], other)
-    blob = torch.load(other, weights_only=False)
+    blob = torch.load(other, weights_only=True)
     blob["state_dict"] = {k: v[..., :1] for k, v in blob["state_dict"].items()}
     torch.save(blob, other)
     with pytest.raises(WeightsError, match="do not fit the oakn architecture"):
         load_weights(other, "oakn")
+
+
+@dataclasses.dataclass
+class _Args:
+    out: Path
+
+
+class _Payload:
+    """Unpickling this runs `touch MARKER`: a weights file that holds code."""
+
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):
+        return os.system, (f"touch {self.marker}",)
+
+
+def test_a_weights_file_holding_code_is_refused_before_it_runs(tmp_path):
+    """A weights file with pickled code (here: a call that creates a file), however
+    ours it looks, is refused by `run --agent cfvs@DIR` with exit 2 naming the file, and the
+    code never runs; so is a training resume state."""
+    from cfvs_maniskill.train import resume_state
+
+    marker = tmp_path / "code_ran"
+    files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR)
+    (tmp_path / "mine" / "square").mkdir(parents=True)
+    bad = tmp_path / "mine" / "square" / "oakn.pt"
+    blob = torch.load(files["oakn"], weights_only=True)
+    blob["config"]["extra"] = _Payload(marker)
+    torch.save(blob, bad)
+    shutil.copy(files["opn"], tmp_path / "mine" / "square" / "opnv.pt")
+    r = run_cli("cfvs_maniskill.run", "--task", "PegInsert6DoF", "--agent",
+                f"cfvs@{tmp_path / 'mine'}", "--episodes", "1")  # fmt: skip
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert f"{bad}: refused: holds objects other than tensors" in r.stderr
+    assert not marker.exists(), "the file's code ran"
+    with pytest.raises(WeightsError, match="refused"):
+        load_weights(bad, "oakn")
+    torch.save({"run_key": {}, "data_sha256": "", "x": _Payload(marker)}, tmp_path / "w.pt.resume")
+    args = _Args(out=tmp_path / "w.pt")
+    with pytest.raises(ValueError, match="refused"):
+        resume_state(args, "", ())
+    assert not marker.exists()
 
 
 def test_ablation_weights_are_chosen_by_how_they_were_trained():

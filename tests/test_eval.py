@@ -92,6 +92,65 @@ def test_sigkill_then_resume_runs_every_job_exactly_once(reference, tmp_path):
     assert _same_outcomes(_records(path), reference)  # as the uninterrupted run
 
 
+def _worker_pids(pid: int) -> list[int]:
+    import psutil
+
+    # spawn's workers; not its resource tracker
+    kids = psutil.Process(pid).children()
+    return [c.pid for c in kids if "spawn_main" in " ".join(c.cmdline())]
+
+
+@pytest.mark.slow
+def test_a_killed_worker_is_replaced_and_its_job_retried(reference, tmp_path):
+    """One worker SIGKILLed mid-run (as a segfault or the OOM killer would): the run ends on
+    its own with every job recorded exactly once, as the uninterrupted run; a re-run finds
+    nothing to do."""
+    path = tmp_path / "episodes.jsonl"
+    cmd = [sys.executable, "-m", "cfvs_maniskill.eval", *ARGS, "--workers", "2",
+           "--out", str(tmp_path)]  # fmt: skip
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 300
+    while time.time() < deadline and p.poll() is None:
+        if path.exists() and len(path.read_text().splitlines()) >= 2:
+            break
+        time.sleep(0.05)
+    workers = _worker_pids(p.pid)
+    assert p.poll() is None and len(workers) == 2, "no running workers to kill"
+    os.kill(workers[0], signal.SIGKILL)
+    out, err = p.communicate(timeout=600)  # a hang fails here
+    assert p.returncode == 0, err[-2000:]
+    assert _same_outcomes(_records(path), reference)
+    assert not any(r.get("crashed") for r in _records(path).values())
+    r = run_cli("cfvs_maniskill.eval", *ARGS, "--workers", "2", "--out", str(tmp_path))
+    assert r.returncode == 0 and "0 to run" in r.stdout, r.stderr[-2000:]
+
+
+@pytest.mark.slow
+def test_a_job_that_kills_every_worker_is_recorded_as_crashed(tmp_path):
+    """A job whose worker dies twice (here: an agent that SIGKILLs its own process) is
+    recorded as crashed with the signal; the other jobs finish and the run ends. The report
+    keeps crashed jobs out of success rates and lists them; --retry-crashed runs them
+    again."""
+    crasher = "tests.crashing_agent:CrashingAgent"
+    args = ["--tasks", "PegInsert3DoF", "--agents", "oracle", crasher, "--objects",
+            "cuboid_test_1", "--init-errors", "small", "--episodes-per-object", "1",
+            "--workers", "2", "--out", str(tmp_path / "run")]  # fmt: skip
+    r = run_cli("cfvs_maniskill.eval", *args)
+    assert r.returncode == 0, r.stderr[-2000:]
+    recs = _records(tmp_path / "run" / "episodes.jsonl")
+    assert len(recs) == 2
+    crashed = [x for x in recs.values() if x.get("crashed")]
+    assert [x["agent"] for x in crashed] == [crasher]
+    assert all("died 2 times" in x["reason"] and "SIGKILL" in x["reason"] for x in crashed)
+    assert all(x["success"] for x in recs.values() if x["agent"] == "oracle")
+    summary = (tmp_path / "run" / "summary.md").read_text()
+    assert "1 crashed jobs" in summary
+    r = run_cli("cfvs_maniskill.eval", *args)
+    assert "0 to run" in r.stdout
+    r = run_cli("cfvs_maniskill.eval", *args, "--retry-crashed")
+    assert r.returncode == 0 and "1 to run" in r.stdout, r.stderr[-2000:]
+
+
 @pytest.mark.slow
 def test_torn_last_line_is_redone_and_nothing_else_lost(reference, tmp_path):
     lines = [json.dumps({**r, "wall_time_s": 0.0}) for r in reference.values()]

@@ -57,6 +57,8 @@ class Agent(abc.ABC):
     max_decisions: int = 30
     privileged: bool = False
     """True only for the oracle, which is handed the env and reads true poses."""
+    weights: dict[str, str] = {}  # noqa: RUF012  (replaced per agent by make_agent)
+    """The weights files the agent loaded -> their sha256 (records' provenance)."""
     phase: str = ""
     """For videos' captions only: what the last `act` did (e.g. "coarse (OAKN)")."""
     estimate: np.ndarray | None = None
@@ -64,8 +66,8 @@ class Agent(abc.ABC):
     at the opening's centre, z out of the hole), drawn into the wrist view; None: none."""
 
     def reset(self, seed: int) -> None:  # noqa: B027  (optional hook)
-        """Called once per episode with the episode's seed (for the agent's own randomness:
-        the same seed gives the same episode)."""
+        """Called once per episode with a seed for the agent's own randomness, derived from
+        (never equal to) the env's seed: the same episode gives the same seed."""
 
     @abc.abstractmethod
     def act(self, observation: Observation) -> Action: ...

@@ -172,8 +172,7 @@ class CFVSAgent(Agent):
         self.stage, self.fine_steps = "coarse", 0
         self.had_face = False  # whether any fine estimate had its face seen round it
         self.phase, self.estimate = "", None
-        # Point subsets are random; seeded from the episode's seed, the same env seed gives
-        # the same episode.
+        # Point subsets are random; seeded per episode, so the same episode repeats exactly.
         self.rng = np.random.default_rng(seed)
 
     # ------------------------------------------------------------------ perception

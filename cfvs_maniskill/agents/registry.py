@@ -209,8 +209,11 @@ def agent_env_kwargs(name: str) -> dict:
 
 def make_agent(name: str, env) -> Agent:
     """The agent `name` for `env`'s task: built from the task's constants alone, except the
-    privileged oracle."""
+    privileged oracle; `agent.weights` says which weights files it loaded (provenance)."""
+    from cfvs_maniskill.provenance import track_weights
+
     factory = resolve_agent(name)
-    if name in PRIVILEGED:
-        return factory(env)
-    return factory(TaskSpec.of(env.unwrapped.task))
+    with track_weights() as loaded:
+        agent = factory(env) if name in PRIVILEGED else factory(TaskSpec.of(env.unwrapped.task))
+    agent.weights = loaded
+    return agent

@@ -37,7 +37,11 @@ class EvalArgs:
     seed: int = 0
     """Base seed; each episode's seed is a stable hash of (task, object, error, episode, seed)."""
     workers: int = 2
-    """Local worker processes (each reuses one env and one agent across episodes)."""
+    """Worker processes (each reuses one env and one agent across episodes); a worker that
+    dies is replaced and its job retried once, then recorded as crashed. 0: run in this
+    process (no protection from a crash; for debugging)."""
+    retry_crashed: bool = False
+    """Run the jobs recorded as crashed again (their new records replace the old)."""
     backend: Literal["local", "ray"] = "local"
     """local: worker processes on this machine; ray: one Ray actor per worker."""
     address: str | None = None
@@ -168,6 +172,8 @@ def main(args: EvalArgs) -> int:
         done = read_done(path)
     except ResultsError as e:
         _fail(str(e))
+    if args.retry_crashed:
+        done = {k: r for k, r in done.items() if not r.get("crashed")}
     todo = [j for j in jobs if j.key not in done]
     print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already in {path}, {len(todo)} to run")
     cfg = WorkerConfig(
@@ -178,15 +184,16 @@ def main(args: EvalArgs) -> int:
     )
     t0 = time.perf_counter()
     t_first = None
-    ok = 0
+    ok = crashed = 0
     bar = tqdm(total=len(todo), unit="ep", desc="eval", file=sys.stderr, smoothing=0.05)
     try:
         for rec in BACKENDS[args.backend](todo, args.workers, cfg, address=args.address):
             append(path, rec)
             t_first = t_first or time.perf_counter()
             ok += rec["success"]
+            crashed += bool(rec.get("crashed"))
             bar.update(1)
-            bar.set_postfix(success=f"{ok}/{bar.n}")
+            bar.set_postfix(success=f"{ok}/{bar.n}", **({"crashed": crashed} if crashed else {}))
     except KeyboardInterrupt:
         bar.close()
         print(f"interrupted: {bar.n} episodes saved in {path}; run again to finish")

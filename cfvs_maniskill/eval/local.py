@@ -1,19 +1,103 @@
-"""Local backend: a pool of worker processes on this machine (1 = in this process)."""
+"""Local backend: worker processes on this machine, one job at a time each, supervised.
+
+The parent hands each worker one job and waits on both its pipe and its process: a worker
+that dies (segfault, SIGKILL, the OOM killer) is replaced and its job retried once, then
+recorded as crashed (crash.py), so the run always ends. `multiprocessing.Pool` replaces a
+dead worker but never returns its job, and the run hung."""
 
 from __future__ import annotations
 
-import multiprocessing as mp
+import os
+import traceback
+from collections import deque
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager, suppress
+from multiprocessing import connection, get_context
 
+from cfvs_maniskill.eval.crash import CrashPolicy, exit_reason
 from cfvs_maniskill.eval.jobs import Job
-from cfvs_maniskill.eval.worker import Worker, WorkerConfig, init_process, run_in_process
+from cfvs_maniskill.eval.worker import Worker, WorkerConfig
+
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+"""One math-library thread per worker process, as Ray gives an actor with num_cpus=1:
+with the libraries' default (one thread per core) two workers' idle threads spin against
+each other on a 2-core machine."""
+
+
+def _serve(conn, cfg: WorkerConfig) -> None:
+    """A worker process: run each job it is sent, send back the record (or the error)."""
+    try:
+        worker, failed = Worker(cfg), None
+    except Exception as e:  # e.g. no renderer: every job would die the same way
+        worker, failed = None, e
+    try:
+        while (job := conn.recv()) is not None:
+            try:
+                if failed is not None:
+                    raise failed
+                conn.send(("ok", worker.run(job)))
+            except Exception as e:  # the parent re-raises it: same as an in-process run
+                try:
+                    conn.send(("error", e))
+                except Exception:  # the exception itself does not pickle
+                    conn.send(("error", RuntimeError(traceback.format_exc())))
+    except (EOFError, KeyboardInterrupt):
+        pass  # the parent went away or was interrupted: nothing left to do
+    finally:
+        if worker is not None:
+            worker.close()
+
+
+@contextmanager
+def _one_thread_env():
+    old = {k: os.environ.get(k) for k in THREAD_VARS}
+    os.environ.update(dict.fromkeys(THREAD_VARS, "1"))
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+class _Slot:
+    """One worker process and the job it is running (None: idle)."""
+
+    def __init__(self, ctx, cfg: WorkerConfig):
+        self.conn, child = ctx.Pipe()
+        with _one_thread_env():  # spawned children copy the environment at start
+            self.process = ctx.Process(target=_serve, args=(child, cfg), daemon=True)
+            self.process.start()
+        child.close()
+        self.job: Job | None = None
+
+    def give(self, job: Job) -> None:
+        self.job = job
+        with suppress(OSError):  # died already: its sentinel says so, handled as a death
+            self.conn.send(job)
+
+    def stop(self, wait: float) -> None:
+        with suppress(OSError):
+            self.conn.send(None)
+        self.process.join(wait)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+        self.conn.close()
 
 
 def run_local(
-    jobs: list[Job], workers: int, cfg: WorkerConfig, address: str | None = None
+    jobs: list[Job],
+    workers: int,
+    cfg: WorkerConfig,
+    address: str | None = None,
+    retries: int = 1,
 ) -> Iterator[dict]:
-    """Yield result records as episodes finish (in any order)."""
-    if workers <= 1:
+    """Yield result records as episodes finish (in any order). `workers` processes (0: in
+    this process, unsupervised: for debugging)."""
+    if workers <= 0:
         w = Worker(cfg)
         try:
             for job in jobs:
@@ -22,14 +106,48 @@ def run_local(
             w.close()
         return
     # spawn: a fresh interpreter per worker (SAPIEN and torch do not survive fork well).
-    ctx = mp.get_context("spawn")
-    pool = ctx.Pool(workers, initializer=init_process, initargs=(cfg,), maxtasksperchild=None)
+    ctx = get_context("spawn")
+    queue = deque(jobs)
+    policy = CrashPolicy(retries)
+    slots = [_Slot(ctx, cfg) for _ in range(min(workers, len(jobs)))]
     try:
-        yield from pool.imap_unordered(run_in_process, jobs, chunksize=1)
-        pool.close()
+        for s in slots:
+            if queue:
+                s.give(queue.popleft())
+        while any(s.job is not None for s in slots):
+            busy = [s for s in slots if s.job is not None]
+            ready = connection.wait([s.conn for s in busy] + [s.process.sentinel for s in busy])
+            for i, s in enumerate(slots):
+                if s.job is None or (s.conn not in ready and s.process.sentinel not in ready):
+                    continue
+                message = None
+                try:
+                    if s.conn.poll():
+                        message = s.conn.recv()
+                except (EOFError, OSError):
+                    message = None
+                if message is None:
+                    # Died mid-job: a fresh worker takes its place (and maybe the job again).
+                    s.process.join(5)
+                    record = policy.on_death(s.job, exit_reason(s.process.exitcode))
+                    if record is None:
+                        queue.appendleft(s.job)
+                    s.job = None
+                    s.stop(0)
+                    slots[i] = s = _Slot(ctx, cfg)
+                    if record is not None:
+                        yield record
+                else:
+                    kind, payload = message
+                    if kind == "error":
+                        raise payload
+                    s.job = None
+                    yield payload
+                if queue:
+                    s.give(queue.popleft())
     finally:
-        pool.terminate()
-        pool.join()
+        for s in slots:
+            s.stop(10 if s.job is None else 0)
 
 
 def _ray(jobs: list[Job], workers: int, cfg: WorkerConfig, address: str | None = None):

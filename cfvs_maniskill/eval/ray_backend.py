@@ -2,15 +2,16 @@
 local Ray instance without an address), one actor per worker.
 
 An actor keeps its env and agents like a local worker. If an actor dies (its node goes
-away, it is killed, it crashes), its episode is given to a fresh actor and recorded once,
-when it finishes; a job that kills `max_retries` actors in a row stops the run with its
-key. Ray is an optional extra: `pip install .[ray]`.
+away, it is killed, it crashes), a fresh actor takes its place and the job is retried once,
+then recorded as crashed (crash.py), as in the local backend: the run always ends. Ray is
+an optional extra: `pip install .[ray]`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 
+from cfvs_maniskill.eval.crash import CrashPolicy
 from cfvs_maniskill.eval.jobs import Job
 from cfvs_maniskill.eval.worker import Worker, WorkerConfig
 
@@ -30,7 +31,7 @@ def run_ray(
     workers: int,
     cfg: WorkerConfig,
     address: str | None = None,
-    max_retries: int = 3,
+    retries: int = 1,
 ) -> Iterator[dict]:
     try:
         import ray
@@ -51,7 +52,7 @@ def run_ray(
     actors = [spawn(i) for i in range(workers)]
     queue = list(reversed(jobs))
     pending: dict = {}
-    tries: dict[str, int] = {}
+    policy = CrashPolicy(retries)
 
     def submit(i: int) -> None:
         if queue:
@@ -66,16 +67,16 @@ def run_ray(
             i, job = pending.pop(ready[0])
             try:
                 rec = ray.get(ready[0])
-            except ray.exceptions.RayActorError:
-                tries[job.key] = tries.get(job.key, 0) + 1
-                if tries[job.key] >= max_retries:
-                    raise RuntimeError(
-                        f"job {job.key}: {max_retries} workers died running it; stopping"
-                    ) from None
+            except ray.exceptions.RayActorError as e:
+                first = (str(e).strip().splitlines() or ["actor died"])[0]
+                record = policy.on_death(job, f"Ray actor died: {first[:200]}")
                 spawn.count += 1
                 actors[i] = spawn(i)
-                queue.append(job)  # retried next, on the fresh actor
+                if record is None:
+                    queue.append(job)  # retried next, on the fresh actor
                 submit(i)
+                if record is not None:
+                    yield record
                 continue
             yield rec
             submit(i)

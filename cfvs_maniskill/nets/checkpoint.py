@@ -12,6 +12,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import pickle
 import sys
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ import torch
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig
 from cfvs_maniskill.nets.oakn import OAKN, OAKNConfig
 from cfvs_maniskill.nets.opn import OPN, OPNConfig
+from cfvs_maniskill.provenance import note_loaded
 
 NETS = {
     "oakn": (OAKN, OAKNConfig),
@@ -43,6 +45,22 @@ def file_sha256(path: Path) -> str:
         while chunk := f.read(1 << 23):
             h.update(chunk)
     return h.hexdigest()
+
+
+def safe_load(path: Path, error: type[Exception]) -> Any:
+    """A torch file's contents, unpickled with `weights_only=True`: tensors and plain data
+    only, so a file holding pickled code is refused before any of it runs."""
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        # torch's message names the global it refused (e.g. posix.system); keep its first line.
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise error(
+            f"{path}: refused: holds objects other than tensors and plain data, which are "
+            f"never unpickled ({first})"
+        ) from e
+    except Exception as e:  # truncated / not a torch file: torch raises many types
+        raise error(f"{path}: not a readable weights file ({type(e).__name__}: {e})") from e
 
 
 def build(net: str, config: dict[str, Any]):
@@ -87,10 +105,8 @@ def load_weights(path: Path | str, net: str | tuple[str, ...], peg: str | None =
     path = Path(path)
     if not path.is_file():
         raise WeightsError(f"{path}: weights file not found (expected a trained {net} file)")
-    try:
-        blob = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as e:  # truncated / not a torch file: torch raises many types
-        raise WeightsError(f"{path}: not a readable weights file ({type(e).__name__}: {e})") from e
+    blob = safe_load(path, WeightsError)
+    note_loaded(path)
     if not isinstance(blob, dict) or blob.get("format") != WEIGHTS_FORMAT:
         raise WeightsError(f"{path}: not a cfvs_maniskill weights file (format {WEIGHTS_FORMAT})")
     if blob.get("net") not in kinds:

@@ -1,0 +1,118 @@
+"""What produced a result record: the code, the weights, the sensor profile, the task and
+the hole object, each by a version or a sha256, so that a table can say which code and
+which files its numbers come from and a stale or mixed cell can be found (report --check)."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import subprocess
+from contextlib import contextmanager
+from importlib import metadata
+from pathlib import Path
+
+from cfvs_maniskill.constants import PROJECT_ROOT
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+@functools.cache
+def code_version() -> str:
+    """`git describe` of the checkout the package runs from (`+dirty` when its code differs
+    from the commit), or the installed package's version outside a checkout."""
+    try:
+        top = _git("rev-parse", "--show-toplevel")
+        if Path(top).resolve() == PROJECT_ROOT:
+            described = _git("describe", "--tags", "--always", "--abbrev=12")
+            # Only the code counts: results written into the tree during a run must not
+            # make the run's own records "dirty".
+            changed = _git("status", "--porcelain", "--", PACKAGE_DIR.name, "pyproject.toml")
+            return described + ("+dirty" if changed else "")
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    try:
+        return metadata.version("cfvs_maniskill")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _git(*args: str) -> str:
+    out = subprocess.run(
+        ["git", "-C", str(PROJECT_ROOT), *args],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=30,
+    )
+    return out.stdout.strip()
+
+
+def file_key(path: Path | str) -> str:
+    """A file's name in records: relative to the project root when inside it (the same on
+    every checkout), else its absolute path."""
+    p = Path(path).resolve()
+    try:
+        return p.relative_to(PROJECT_ROOT).as_posix()
+    except ValueError:
+        return str(p)
+
+
+@functools.cache
+def _sha256(path: Path, mtime_ns: int, size: int) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 23):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def sha256(path: Path | str) -> str:
+    """A file's sha256, computed once per process for an unchanged file."""
+    p = Path(path).resolve()
+    st = p.stat()
+    return _sha256(p, st.st_mtime_ns, st.st_size)
+
+
+def files_entry(*paths: Path | str) -> dict[str, str]:
+    return {file_key(p): sha256(p) for p in paths}
+
+
+_LOADED: list[dict[str, str]] = []
+
+
+@contextmanager
+def track_weights():
+    """Collects {file: sha256} of every weights file loaded inside the block (nested blocks
+    each see what was loaded inside them)."""
+    loaded: dict[str, str] = {}
+    _LOADED.append(loaded)
+    try:
+        yield loaded
+    finally:
+        _LOADED.remove(loaded)
+
+
+def note_loaded(path: Path | str) -> None:
+    """Called by the weights loader for every file it reads."""
+    if _LOADED:
+        entry = files_entry(path)
+        for loaded in _LOADED:
+            loaded.update(entry)
+
+
+def of_episode(env, weights: dict[str, str]) -> dict:
+    """The provenance of an episode on `env` by an agent that loaded `weights`."""
+    u = env.unwrapped
+    spec = u.object_specs[u.object_index]
+    object_files = [spec.source, *([spec.mesh_file] if spec.mesh_file else [])]
+    return {
+        "code": code_version(),
+        "weights": dict(sorted(weights.items())),
+        "sensor": {"name": u.sensor_profile.name, **_one(u.sensor_profile.source)},
+        "task": {"name": u.task.name, **_one(u.task.source)},
+        "object": {"name": spec.name, "files": files_entry(*object_files)},
+    }
+
+
+def _one(path: Path | str) -> dict[str, str]:
+    return {"file": file_key(path), "sha256": sha256(path)}

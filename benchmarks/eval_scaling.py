@@ -34,7 +34,9 @@ def _eval(workers: int, per_object: int, backend: str = "local", address: str = 
         if address:
             args += ["--address", address]
         r = subprocess.run([sys.executable, "-c", _PEAK, *args], capture_output=True, text=True)
-        m = re.search(r"\(([\d.]+) episodes/s; ([\d.]+) episodes/s after the first\)", r.stdout)
+        m = re.search(
+            r"\(([\d.]+) episodes/s; ([\d.]+) episodes/s once every worker had started\)", r.stdout
+        )
         if not m:
             raise RuntimeError(f"eval failed:\n{r.stdout[-1500:]}\n{r.stderr[-1500:]}")
         usage = json.loads(r.stdout.strip().splitlines()[-1])
@@ -42,7 +44,7 @@ def _eval(workers: int, per_object: int, backend: str = "local", address: str = 
         return {"overall": float(m[1]), "steady": float(m[2]), "episodes": n, **usage}
 
 
-def measure(per_object: int = 12, ray_nodes: int = 2) -> tuple[list[Figure], str]:
+def measure(per_object: int = 40, ray_nodes: int = 2) -> tuple[list[Figure], str]:
     one = _eval(1, per_object)
     two = _eval(2, per_object)
     s = two["steady"] / one["steady"]
@@ -56,16 +58,18 @@ def measure(per_object: int = 12, ray_nodes: int = 2) -> tuple[list[Figure], str
     ]
     cores_line = (
         f"One local worker keeps {one['cores']:.2f} cores busy (SwiftShader renders on its own "
-        f"threads), two keep {two['cores']:.2f}: on this {os.cpu_count()}-core machine the "
-        f"second worker can add at most {os.cpu_count() / one['cores']:.2f}x (both "
-        "figures include the start-up, whose shader compile is multi-threaded)."
+        f"threads, in parallel with the episode's own work), two keep {two['cores']:.2f}: on "
+        f"this {os.cpu_count()}-core machine the second worker can add at most "
+        f"{os.cpu_count() / one['cores']:.2f}x (both figures include the start-up, whose "
+        "shader compile is multi-threaded). Steady rates count from the moment as many "
+        "episodes as workers are in, so that no worker's start-up is charged to them."
     )
     figures = [
         Figure(
             "eval episodes/s, 2 local workers / 1 worker",
             f"{s:.2f}",
-            ">= 1.0",
-            s >= 1.0,
+            ">= 1.8",
+            s >= 1.8,
             f"{two['steady']:.2f} vs {one['steady']:.2f} episodes/s",
         ),  # fmt: skip
         Figure(

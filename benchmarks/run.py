@@ -23,7 +23,7 @@ class BenchArgs:
     """CFVS 6-DoF episodes timed for the render + physics ratio."""
     servo_episodes: int = 20
     """CFVS 3-DoF episodes per initial error for the servo time."""
-    eval_per_object: int = 12
+    eval_per_object: int = 40
     """Episodes per test object in each eval-throughput run."""
     ray: bool = True
     """Include the Ray cluster figure (needs `pip install '.[ray]'`)."""

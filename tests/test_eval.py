@@ -333,6 +333,61 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
     }
 
 
+def test_every_record_says_which_code_weights_sensor_task_and_object_made_it(reference):
+    from cfvs_maniskill.constants import PROJECT_ROOT
+    from cfvs_maniskill.provenance import code_version, sha256
+
+    for rec in reference.values():
+        p = rec["provenance"]
+        assert p["code"] == code_version() and p["code"]
+        assert p["weights"] == {}  # oracle and ICP from the workspace centre load none
+        assert p["sensor"] == {"name": "ideal", "file": "sensors/ideal.yaml",
+                               "sha256": sha256(PROJECT_ROOT / "sensors/ideal.yaml")}  # fmt: skip
+        assert p["task"]["sha256"] == sha256(PROJECT_ROOT / "tasks/PegInsert3DoF.yaml")
+        (hole_file,) = p["object"]["files"]
+        assert hole_file == f"assets/holes/{rec['object']}.yaml"
+
+
+def test_report_check_names_mixed_stale_and_crashed_cells(reference, tmp_path):
+    """`report --check` passes on records of one provenance made with today's files, and
+    fails naming the cell when one record comes from other code (mixed), other weights or
+    an edited sensor file (stale), or a job crashed; also when the README's table is not
+    what the records give."""
+    results = _results_folder(reference, tmp_path)
+    readme = tmp_path / "README.md"
+    readme.write_text("<!-- report:headline begin -->\n<!-- report:headline end -->\n")
+    check = ["cfvs_maniskill.report", str(results), "--check", "--readme", str(readme)]
+    r = run_cli(*check)
+    assert r.returncode == 1 and "headline table is not what the records give" in r.stdout
+    assert run_cli("cfvs_maniskill.report", str(results), "--readme", str(readme),
+                   "--no-videos", "--out", str(tmp_path / "rep")).returncode == 0  # fmt: skip
+    r = run_cli(*check)
+    assert r.returncode == 0, r.stdout + r.stderr[-2000:]
+    assert "0 problems" in r.stdout
+    path = results / "eval" / "episodes.jsonl"
+    clean = path.read_text()
+    edits = {
+        "code": lambda p: p.update(code="0123456789ab"),
+        "weights": lambda p: p["weights"].update({"agents/cfvs/round/oakn.pt": "0" * 64}),
+        "sensor": lambda p: p["sensor"].update(sha256="1" * 64),
+    }
+    for what, edit in edits.items():
+        recs = [json.loads(x) for x in clean.splitlines()]
+        icp = next(x for x in recs if x["agent"] == "icp")
+        edit(icp["provenance"])
+        path.write_text("".join(json.dumps(x) + "\n" for x in recs))
+        r = run_cli(*check)
+        assert r.returncode == 1, what
+        says = {"code": "mixed: 2 provenances", "weights": "other weights today",
+                "sensor": "sensor file sensors/ideal.yaml changed since"}[what]  # fmt: skip
+        assert "icp PegInsert3DoF ideal small: " in r.stdout and says in r.stdout, r.stdout
+    recs = [json.loads(x) for x in clean.splitlines()]
+    recs[0].update(crashed=True, success=False)
+    path.write_text("".join(json.dumps(x) + "\n" for x in recs))
+    r = run_cli(*check)
+    assert r.returncode == 1 and ": crashed: " in r.stdout, r.stdout
+
+
 def test_report_on_an_empty_folder_exits_2(tmp_path):
     r = run_cli("cfvs_maniskill.report", str(tmp_path), "--out", str(tmp_path / "r"))
     assert r.returncode == 2 and "no result records" in r.stderr

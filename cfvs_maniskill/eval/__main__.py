@@ -184,12 +184,14 @@ def main(args: EvalArgs) -> int:
     )
     t0 = time.perf_counter()
     t_first = None
+    started = max(1, min(args.workers, len(todo)))
     ok = crashed = 0
     bar = tqdm(total=len(todo), unit="ep", desc="eval", file=sys.stderr, smoothing=0.05)
     try:
         for rec in BACKENDS[args.backend](todo, args.workers, cfg, address=args.address):
             append(path, rec)
-            t_first = t_first or time.perf_counter()
+            if bar.n + 1 == started:  # by then (about) every worker has built its scene
+                t_first = time.perf_counter()
             ok += rec["success"]
             crashed += bool(rec.get("crashed"))
             bar.update(1)
@@ -207,10 +209,12 @@ def main(args: EvalArgs) -> int:
     bar.close()
     wall = time.perf_counter() - t0
     line = f"{len(todo)} episodes in {wall:.0f} s ({len(todo) / max(wall, 1e-9):.2f} episodes/s"
-    if t_first and len(todo) > 1:
-        # Without the workers' start-up (scene build, shader compile): the steady rate.
-        steady = (len(todo) - 1) / max(time.perf_counter() - t_first, 1e-9)
-        line += f"; {steady:.2f} episodes/s after the first"
+    if t_first and len(todo) > started:
+        # Without the workers' start-up (scene build, shader compile): the steady rate,
+        # counted once as many episodes as workers are in (one worker's start-up can end
+        # seconds after another's: counting from the first would charge it to the rate).
+        steady = (len(todo) - started) / max(time.perf_counter() - t_first, 1e-9)
+        line += f"; {steady:.2f} episodes/s once every worker had started"
     print(line + ")")
     summary = write_summary(path, args.out / "summary.md", asdict(args))
     print(summary)

@@ -27,6 +27,8 @@ def exit_reason(exitcode: int | None) -> str:
 class CrashPolicy:
     retries: int = 1
     """Fresh workers a job gets after the first one died running it."""
+    search_radius: float | None = None
+    """The run's executor setting, which labels its records (no-search variants)."""
     deaths: Counter = field(default_factory=Counter)
 
     def on_death(self, job: Job, reason: str) -> dict | None:
@@ -34,7 +36,10 @@ class CrashPolicy:
         self.deaths[job.key] += 1
         if self.deaths[job.key] <= self.retries:
             return None
-        return crashed_record(job, reason, self.deaths[job.key])
+        record = crashed_record(job, reason, self.deaths[job.key])
+        if self.search_radius is not None:
+            record["search_radius_m"] = self.search_radius
+        return record
 
 
 def crashed_record(job: Job, reason: str, deaths: int) -> dict:

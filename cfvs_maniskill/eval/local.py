@@ -7,21 +7,15 @@ dead worker but never returns its job, and the run hung."""
 
 from __future__ import annotations
 
-import os
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager, suppress
+from contextlib import suppress
 from multiprocessing import connection, get_context
 
 from cfvs_maniskill.eval.crash import CrashPolicy, exit_reason
 from cfvs_maniskill.eval.jobs import Job
 from cfvs_maniskill.eval.worker import Worker, WorkerConfig
-
-THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-"""One math-library thread per worker process, as Ray gives an actor with num_cpus=1:
-with the libraries' default (one thread per core) two workers' idle threads spin against
-each other on a 2-core machine."""
 
 
 def _serve(conn, cfg: WorkerConfig) -> None:
@@ -48,28 +42,13 @@ def _serve(conn, cfg: WorkerConfig) -> None:
             worker.close()
 
 
-@contextmanager
-def _one_thread_env():
-    old = {k: os.environ.get(k) for k in THREAD_VARS}
-    os.environ.update(dict.fromkeys(THREAD_VARS, "1"))
-    try:
-        yield
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
 class _Slot:
     """One worker process and the job it is running (None: idle)."""
 
     def __init__(self, ctx, cfg: WorkerConfig):
         self.conn, child = ctx.Pipe()
-        with _one_thread_env():  # spawned children copy the environment at start
-            self.process = ctx.Process(target=_serve, args=(child, cfg), daemon=True)
-            self.process.start()
+        self.process = ctx.Process(target=_serve, args=(child, cfg), daemon=True)
+        self.process.start()
         child.close()
         self.job: Job | None = None
 
@@ -108,7 +87,7 @@ def run_local(
     # spawn: a fresh interpreter per worker (SAPIEN and torch do not survive fork well).
     ctx = get_context("spawn")
     queue = deque(jobs)
-    policy = CrashPolicy(retries)
+    policy = CrashPolicy(retries, cfg.search_radius)
     slots = [_Slot(ctx, cfg) for _ in range(min(workers, len(jobs)))]
     try:
         for s in slots:

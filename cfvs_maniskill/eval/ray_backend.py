@@ -52,7 +52,7 @@ def run_ray(
     actors = [spawn(i) for i in range(workers)]
     queue = list(reversed(jobs))
     pending: dict = {}
-    policy = CrashPolicy(retries)
+    policy = CrashPolicy(retries, cfg.search_radius)
 
     def submit(i: int) -> None:
         if queue:

@@ -31,6 +31,31 @@ class ReportArgs:
     readme: Path | None = None
     """Also fill the headline table (main agents, tasks and sensor profiles, 15 / 30 cm)
     into this file between its `<!-- report:headline begin/end -->` markers."""
+    check: bool = False
+    """Write nothing; exit 1 when a headline cell comes from mixed, stale or crashed records
+    (report/trace.py) or when --readme's headline table is not what the records give."""
+
+
+def check(records: list[dict], crashed: list[dict], readme: Path | None) -> int:
+    """`--check`: every headline cell current and of one provenance, the README's table
+    what the records give. Prints each problem; 0 when there is none."""
+    from cfvs_maniskill.report import tables, trace
+
+    problems = []
+    for (label, task, sensor, init), recs in tables.headline_cells(records + crashed).items():
+        status, reasons = trace.cell_status(recs)
+        if status != "ok":
+            problems.append(f"{label} {task} {sensor} {init}: {status}: {'; '.join(reasons)}")
+    if readme is not None:
+        text = readme.read_text()
+        want = tables.replace_marked(text, "headline", tables.table_headline(records), str(readme))
+        if want != text:
+            problems.append(f"{readme}: the headline table is not what the records give")
+    for p in problems:
+        print(p)
+    n = len(tables.headline_cells(records))
+    print(f"report --check: {len(problems)} problems in {n} headline cells")
+    return 1 if problems else 0
 
 
 def main(args: ReportArgs) -> int:
@@ -40,10 +65,13 @@ def main(args: ReportArgs) -> int:
     if not args.results.is_dir():
         print(f"error: {args.results}: not a folder of results", file=sys.stderr)
         return 2
-    records = load_records(args.results)
+    crashed: list[dict] = []
+    records = load_records(args.results, crashed)
     if not records:
         print(f"error: {args.results}: no result records (*.jsonl) found", file=sys.stderr)
         return 2
+    if args.check:
+        return check(records, crashed, args.readme)
     readme_text = None
     if args.readme is not None:
         try:
@@ -86,6 +114,8 @@ def main(args: ReportArgs) -> int:
             tables.table_iv(ideal),
             "## Closed-loop residual: true error from the pre-insertion pose after each move",
             residuals.table(records),
+            "## Provenance: which code and files each agent's records come from",
+            tables.table_provenance(records, crashed),
             "## Plots",
             "\n".join(f"![{p.stem}]({p.name})" for p in pngs),
             "## Videos: first success and first failure per agent and task",

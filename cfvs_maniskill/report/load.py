@@ -15,26 +15,31 @@ def init_label(rec: dict) -> str:
     return "small" if rec["init_error_m"] < 0.225 else "large"
 
 
-def load_records(root: Path) -> list[dict]:
+def load_records(root: Path, crashed: list[dict] | None = None) -> list[dict]:
     """Records with `label` (the agent, or the folder's name when it names a variant of
     that agent, e.g. results/cfvs_plain) and `init` (small / large).
 
-    Records on objects outside the default library (extra `--assets`, e.g. the CAD parts in
-    results/cad_parts_v2) are left out: the paper's tables are about its test objects.
+    Crashed jobs (no outcome) go to `crashed` instead. Records on objects outside the
+    default library (extra `--assets`, e.g. the CAD parts in results/cad_parts_v2) are left
+    out: the paper's tables are about its test objects.
     """
     known = set(load_library().specs)
     out, other = [], 0
+    crashed = [] if crashed is None else crashed
     for f in sorted(root.rglob("*.jsonl")):
         if "archive" in f.relative_to(root).parts[:-1]:
             continue  # earlier measurements kept for the record (other code, settings)
         folder = f.parent.name if f.parent != root else None
-        for line in f.read_text().splitlines():
+        by_key: dict = {}  # an eval's job re-run (--retry-crashed) replaces its record
+        for i, line in enumerate(f.read_text().splitlines()):
             if not line.strip():
                 continue
             try:
                 rec = json.loads(line)
             except ValueError:
                 continue  # a torn last line of a running evaluation
+            by_key[rec.get("key", i)] = rec
+        for rec in by_key.values():
             if rec.get("object") not in known:
                 other += 1
                 continue
@@ -45,7 +50,15 @@ def load_records(root: Path) -> list[dict]:
                 label = folder  # a variant's folder: results/cfvs_plain, results/3drhd_plain
             rec["label"], rec["init"] = label, init_label(rec)
             rec.setdefault("sensor", "ideal")  # records from before sensor profiles
-            out.append(rec)
+            # A crashed job has no outcome: in no success rate, listed by the report.
+            (crashed if rec.get("crashed") else out).append(rec)
+    if crashed:
+        print(
+            f"report: {len(crashed)} crashed jobs left out of every success rate: "
+            + ", ".join(r["key"] for r in crashed[:5])
+            + (" ..." if len(crashed) > 5 else ""),
+            file=sys.stderr,
+        )
     if other:
         print(
             f"report: {other} records on objects outside the default library left out",

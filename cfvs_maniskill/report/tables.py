@@ -165,6 +165,40 @@ HEADLINE_TASKS = ("PegInsert3DoF", "PegInsert4DoF", "PegInsert6DoF")
 HEADLINE_SENSORS = ("ideal", "realistic")
 
 
+def headline_cells(records: list[dict]) -> dict[tuple, list[dict]]:
+    """(agent, task, sensor, initial error) -> the records of that headline cell."""
+    cells: dict[tuple, list[dict]] = defaultdict(list)
+    for r in records:
+        head = r["label"] in HEADLINE_AGENTS and r["task"] in HEADLINE_TASKS
+        if head and r["sensor"] in HEADLINE_SENSORS:
+            cells[(r["label"], r["task"], r["sensor"], r["init"])].append(r)
+    return cells
+
+
+def table_provenance(records: list[dict], crashed: list[dict]) -> str:
+    """Per agent, task and sensor profile: the records' code versions and whether they are
+    of one provenance and current (report/trace.py)."""
+    from cfvs_maniskill.report import trace
+
+    cells: dict[tuple, list[dict]] = defaultdict(list)
+    for r in records + crashed:
+        cells[(r["label"], r["task"], r["sensor"])].append(r)
+    out = [
+        "`mixed`: the records differ in code, weights, sensor or task file; `stale`: made "
+        "with files that are not today's; `crashed`: jobs without an outcome.",
+        "",
+        "| agent | task | sensor | episodes | code (records) | status |",
+        "|---|---|---|---|---|---|",
+    ]
+    for (label, task, sensor), recs in sorted(cells.items()):
+        status, reasons = trace.cell_status(recs)
+        note = status if status == "ok" else f"**{status}**: {'; '.join(reasons)}"
+        out.append(
+            f"| {label} | {task} | {sensor} | {len(recs)} | {trace.code_versions(recs)} | {note} |"
+        )
+    return "\n".join(out)
+
+
 def table_headline(records: list[dict]) -> str:
     """Success at 15 / 30 cm per agent, task and sensor profile, the main agents only (the
     README's table; everything else is in the report)."""

@@ -1,12 +1,19 @@
 """Which code and files each table cell comes from, and whether it is still what today's
 code and files would give: a cell is *mixed* when its records differ in code version,
 weights, sensor profile or task file, and *stale* when they were made with weights, a
-sensor profile, a task or hole file that is not today's (or with no provenance at all)."""
+sensor profile, a task or hole file that is not today's (or with no provenance at all).
+
+Records made before records carried provenance have a reconstructed one, `{"code":
+COMMIT, "reconstructed": "git"}`: COMMIT added the record to the repository (the code that
+made it is that commit or an earlier one), and its files are those at today's paths as
+they were in COMMIT, read from git when a report needs them (`resolve`)."""
 
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
+import subprocess
 from collections import Counter
 from pathlib import Path
 
@@ -14,10 +21,70 @@ from cfvs_maniskill.constants import PROJECT_ROOT
 from cfvs_maniskill.provenance import sha256
 
 
+def _git(*args: str, text: bool = True):
+    return subprocess.run(
+        ["git", "-C", str(PROJECT_ROOT), *args], capture_output=True, text=text, check=True
+    ).stdout
+
+
+@functools.cache
+def _tree(commit: str) -> dict[str, str]:
+    """path -> blob id of the files an episode depends on, in `commit`."""
+    listing = _git("ls-tree", "-r", commit, "--", "agents", "sensors", "tasks", "assets")
+    return {ln.split("\t", 1)[1]: ln.split()[2] for ln in listing.splitlines()}
+
+
+@functools.cache
+def _blob_sha256(blob: str) -> str:
+    return hashlib.sha256(_git("cat-file", "blob", blob, text=False)).hexdigest()
+
+
+def _at(commit: str, path: str) -> str:
+    blob = _tree(commit).get(path)
+    return _blob_sha256(blob) if blob else f"absent in {commit}"
+
+
+@functools.cache
+def _hole_files() -> dict[str, tuple[str, ...]]:
+    """Hole object name -> its files (today's paths), over every bundled folder."""
+    from cfvs_maniskill.objects.library import load_library
+    from cfvs_maniskill.provenance import file_key
+
+    dirs = [d for d in sorted((PROJECT_ROOT / "assets").iterdir()) if d.is_dir()]
+    lib = load_library(dirs, include_default=False)
+    return {
+        n: (file_key(s.source), *([file_key(s.mesh_file)] if s.mesh_file else []))
+        for n, s in lib.specs.items()
+    }
+
+
+def resolve(rec: dict) -> dict:
+    """The record's provenance, a reconstructed one filled in from git."""
+    p = rec.get("provenance") or {}
+    if p.get("reconstructed") != "git":
+        return p
+    commit = p["code"]
+    try:
+        weights = agent_weights_today(rec["agent"], rec["task"])
+        sensor, task = rec.get("sensor", "ideal"), rec["task"]
+        files = _hole_files().get(rec.get("object", ""), ())
+        return {
+            **p,
+            "weights": None if weights is None else {f: _at(commit, f) for f in weights},
+            "sensor": {"name": sensor, "file": f"sensors/{sensor}.yaml"}
+            | {"sha256": _at(commit, f"sensors/{sensor}.yaml")},
+            "task": {"name": task, "file": f"tasks/{task}.yaml"}
+            | {"sha256": _at(commit, f"tasks/{task}.yaml")},
+            "object": {"name": rec.get("object"), "files": {f: _at(commit, f) for f in files}},
+        }
+    except (OSError, subprocess.CalledProcessError):
+        return {**p, "weights": None, "unresolved": "not in a git checkout with that commit"}
+
+
 def signature(rec: dict) -> tuple:
     """What must agree between the records of one cell (the object's files may differ: a
     cell averages over objects)."""
-    p = rec.get("provenance") or {}
+    p = resolve(rec)
     return (
         p.get("code"),
         json.dumps(p.get("weights"), sort_keys=True),
@@ -53,7 +120,7 @@ def agent_weights_today(agent: str, task: str) -> dict[str, str] | None:
 
 def stale_reasons(rec: dict) -> list[str]:
     """Why a record is not what today's code and files would give (empty: current)."""
-    p = rec.get("provenance")
+    p = resolve(rec)
     if not p:
         return ["no provenance"]
     out = []

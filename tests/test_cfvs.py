@@ -174,13 +174,13 @@ def test_cfvs_inserts_on_unseen_objects(make_env, env_id):
     env = make_env(env_id, obs_mode="pointcloud", objects=("test",))
     agent = CFVSAgent(TaskSpec.of(env.unwrapped.task))
     ex = Executor(env)
-    results = [run_episode(env, agent, ex, seed=s) for s in range(500, 508)]
+    results = [run_episode(env, agent, ex, seed=s) for s in range(500, 512)]
     ok = sum(r.success for r in results)
-    # Measured over 200 episodes per cell (README): 3-DoF 1.00, 6-DoF ~0.95.
-    assert ok >= (7 if env_id.startswith("PegInsert3DoF") else 6), [
-        (r.object, r.reason) for r in results
+    # The README's rates (200 episodes per cell): 3-DoF 1.00, 6-DoF 1.00 / 0.99; these 12
+    # scenes: 12 and 12. One failure in 6-DoF is within the rate; two is a regression.
+    assert ok >= (12 if env_id.startswith("PegInsert3DoF") else 11), [
+        (r.object, r.reason) for r in results if not r.success
     ]
-    assert all(r.reason or r.success for r in results)
 
 
 def test_agent_gives_up_with_a_reason_when_it_sees_nothing(make_env):

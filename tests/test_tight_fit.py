@@ -161,14 +161,13 @@ def test_tight_fit_contact_model(make_env):
 
     # The true pose: every episode ends at rest (no explosion), scored with its reason,
     # and the tip never passes the floor although the insertion is commanded 1 cm past it.
-    # (The oracle's rate at 0.5 mm is in the README; here the fit must be possible at all.)
+    # The true pose goes in on every scene (80 of 80 measured at 0.5 mm, docs/tight-fits.md).
     ex = Executor(env)
     assert ex.insertion_mode == "force"
     oracle = OracleAgent(env)
     results = [run_episode(env, oracle, ex, seed=seed) for seed in range(4)]
-    assert any(r.success for r in results), [r.reason for r in results]
+    assert all(r.success for r in results), [r.reason for r in results]
     for r in results:
-        assert r.success or r.reason
         assert r.tip_to_bottom_m > -0.001, r  # the floor holds
         if r.success:
             assert r.lateral_offset_m < 0.0005

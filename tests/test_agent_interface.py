@@ -16,7 +16,7 @@ from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import ALLOWED_OBS, TaskSpec
 from cfvs_maniskill.agents.registry import AGENTS, PRIVILEGED, agent_env_kwargs, make_agent
 from cfvs_maniskill.envs.task_config import TaskConfig
-from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.episode import agent_seed, run_episode
 from cfvs_maniskill.robots.ur5 import STEREO_UIDS
 
 ENV_ID = "PegInsert6DoF-v1"
@@ -98,14 +98,16 @@ def _keys(d: dict, prefix: str = "") -> set[str]:
 
 @pytest.mark.parametrize(("name", "env_id"), [("cfvs", ENV_ID), ("kovis", "PegInsert3DoF-v1")])
 def test_agents_are_handed_only_what_a_robot_has(make_env, name, env_id):
-    """Through a whole episode: reset gets the episode seed (an int) and nothing else; each
+    """Through a whole episode: reset gets a seed derived from the episode's (an int, never
+    the env's seed, which fixes the scene) and nothing else; each
     observation holds only the wrist camera's cloud or images (no segmentation, no true
     poses, no sensor extrinsics, no noise-free depth of the stereo imagers), the tcp pose,
     joint angles and the wrist wrench."""
     env = make_env(env_id, **agent_env_kwargs(name), sensor="realistic")
     spy = Spy(make_agent(name, env))
     run_episode(env, spy, Executor(env), seed=21)
-    assert spy.resets == [21] and type(spy.resets[0]) is int
+    assert spy.resets == [agent_seed(21)] and type(spy.resets[0]) is int
+    assert agent_seed(21) != 21 and agent_seed(22) != agent_seed(21)
     assert spy.seen
     allowed = (
         {f"pointcloud/{k}" for k in ALLOWED_OBS["pointcloud"]}

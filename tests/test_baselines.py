@@ -136,14 +136,14 @@ def test_give_up_on_an_empty_cloud(make_env):
 
 
 @pytest.mark.slow
-def test_kovis_servos_towards_the_hole(make_env):
-    """KOVIS (shipped round weights, stereo images), 3-DoF from 15 cm on a training cuboid:
-    every episode ends with the peg within 5 cm of the hole axis, closed loop from its
-    images alone (untrained weights wander off: 9.5 cm in one try). Its measured success
-    and precision are in agents/kovis/README.md."""
-    results = _episodes(make_env, "kovis", "PegInsert3DoF", ["cuboid_train_a"], range(300, 304))
+def test_kovis_inserts_on_its_3dof_scenes(make_env):
+    """KOVIS (shipped round weights, stereo images), 3-DoF from 15 cm on a training cuboid,
+    closed loop from its images alone: it inserts (8 of 8 on seeds 300-307 measured; 0.91 /
+    0.94 on the test objects, README), every episode within 5 cm of the axis (untrained
+    weights wander off: 9.5 cm in one try)."""
+    results = _episodes(make_env, "kovis", "PegInsert3DoF", ["cuboid_train_a"], range(300, 306))
+    assert sum(r.success for r in results) >= 5, [r.reason for r in results]
     assert all(r.lateral_offset_m < 0.05 for r in results), [r.lateral_offset_m for r in results]
-    assert all(r.success or r.reason for r in results)
 
 
 @pytest.mark.slow

@@ -36,18 +36,19 @@ if [ ${#missing[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
 fi
 
-# 2. Virtual environment + package. Re-installed only when pyproject.toml changes.
+# 2. Virtual environment + package. Re-installed only when pyproject.toml or the lock changes.
 if [ ! -x "$VENV/bin/python" ]; then
   log "creating $VENV"
   python3.11 -m venv "$VENV"
 fi
 stamp=$VENV/.cfvs_installed
-want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+want=$(cat pyproject.toml constraints.txt | sha256sum | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   log "installing the package and its pinned dependencies (first run: a few minutes)"
   # torch first, pinned: pip then never pulls the multi-GB CUDA build as a dependency.
   "$VENV/bin/pip" install -q "torch==2.13.0"
-  "$VENV/bin/pip" install -q -e ".[dev]"
+  # constraints.txt: every indirect package at the version the tests ran with.
+  "$VENV/bin/pip" install -q -c constraints.txt -e ".[dev]"
   echo "$want" > "$stamp"
 fi
 

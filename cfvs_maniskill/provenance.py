@@ -57,13 +57,17 @@ def file_key(path: Path | str) -> str:
         return str(p)
 
 
-@functools.cache
-def _sha256(path: Path, mtime_ns: int, size: int) -> str:
+def file_sha256(path: Path | str) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
         while chunk := f.read(1 << 23):
             h.update(chunk)
     return h.hexdigest()
+
+
+@functools.cache
+def _sha256(path: Path, mtime_ns: int, size: int) -> str:
+    return file_sha256(path)
 
 
 def sha256(path: Path | str) -> str:

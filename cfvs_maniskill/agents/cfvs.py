@@ -73,7 +73,7 @@ class CFVSConfig:
     the peg moves on it alone: far from the pose one vote's error (~1 mm) is small against
     the move and the next step corrects it. Nearer, the other `fine_votes - 1` run too and
     all are averaged, so the step that decides to stop sees the full average. 0: every
-    step averages all votes (the loop before session 16)."""
+    step averages all votes."""
     final_correction: bool = True
     """When the offset is below (e_t, e_r), move by it once more, then insert (no new
     observation: it is the move Algorithm 2's next iteration would start with). False: the
@@ -95,31 +95,31 @@ class CFVSConfig:
     """The rim fit tries a 10 mm ring before the 20 mm one and keeps it when the noise
     measured on it predicts a normal within 0.1 deg (perception/rim.py): beside a step
     round the opening (a counterbore) the wide ring reaches the step. False: the 20 mm
-    ring always (the agent before session 18's second change)."""
+    ring always."""
     opening_fit: bool = True
     """6-DoF square holes, with `rim_plane`: move the estimate in the face's plane and turn
     it about its axis onto the opening the wrist cloud shows, from the face's edge and the
     walls in view (perception/opening.py; the hole's size is the task's nominal one).
-    False: OPN's position and yaw (the agent before session 17). Round holes keep OPN's."""
+    False: OPN's position and yaw. Round holes keep OPN's."""
     face_height: bool = True
     """6-DoF, with `rim_plane`: put the hole's opening at the level of the face seen just
     outside it (perception/opening.face_height) instead of OPN's height. OPN's height was
     measured 3-4 mm above the face beside walls and pockets and 2 cm off on a flange, where
     the force-guided insertion took a peg wedged in the entry for one deep in the hole.
-    False: OPN's height (the agent before session 19)."""
+    False: OPN's height."""
     face_guard: bool = True
     """6-DoF, with `face_height`: when OPN's new estimate has no face round its opening in
     the cloud (fewer than MIN_LEVEL_POINTS 1-6 mm outside it) after an estimate that had
     one, the fine loop stops and the peg is inserted from where it is, the pose of the last
     estimate the face supported. Beside a step or a gusset OPN can jump to another surface
     from one step to the next (a 4 cm step's top: 42 mm above the face, 6 mm aside) and
-    the loop alternated between the two to its limit. False: every estimate is taken (the
-    agent of session 19's first change, `cfvs_no_face_guard`)."""
+    the loop alternated between the two to its limit. False: every estimate is taken
+    (`cfvs_no_face_guard`)."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the
     pre-insertion pose (perception/view.py; the coarse cloud says what stands over the
-    face). False: always the nearest (the agent before session 18)."""
+    face). False: always the nearest."""
     weights_dir: Path = WEIGHTS_DIR
 
 

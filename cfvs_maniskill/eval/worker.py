@@ -84,17 +84,3 @@ class Worker:
     def close(self) -> None:
         for env in self.envs.values():
             env.close()
-
-
-_WORKER: Worker | None = None
-
-
-def init_process(cfg: WorkerConfig) -> None:
-    """Pool initializer: one Worker per process."""
-    global _WORKER
-    _WORKER = Worker(cfg)
-
-
-def run_in_process(job: Job) -> dict:
-    assert _WORKER is not None, "init_process was not called"
-    return _WORKER.run(job)

@@ -9,7 +9,6 @@ and says exactly what is wrong with a file that does not fit.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import os
 import pickle
@@ -22,6 +21,9 @@ import torch
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig
 from cfvs_maniskill.nets.oakn import OAKN, OAKNConfig
 from cfvs_maniskill.nets.opn import OPN, OPNConfig
+from cfvs_maniskill.provenance import (
+    file_sha256 as file_sha256,  # re-exported: callers hash data files
+)
 from cfvs_maniskill.provenance import note_loaded
 
 NETS = {
@@ -37,14 +39,6 @@ WEIGHTS_FORMAT = "cfvs_maniskill.weights/1"
 
 class WeightsError(ValueError):
     """A weights file that cannot be used; the message names the file and what it holds."""
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(1 << 23):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def safe_load(path: Path, error: type[Exception]) -> Any:

@@ -81,10 +81,9 @@ def resolve(rec: dict) -> dict:
         return {**p, "weights": None, "unresolved": "not in a git checkout with that commit"}
 
 
-def signature(rec: dict) -> tuple:
-    """What must agree between the records of one cell (the object's files may differ: a
-    cell averages over objects)."""
-    p = resolve(rec)
+def signature(p: dict) -> tuple:
+    """What must agree between the records of one cell, from a resolved provenance (the
+    object's files may differ: a cell averages over objects)."""
     return (
         p.get("code"),
         json.dumps(p.get("weights"), sort_keys=True),
@@ -118,9 +117,9 @@ def agent_weights_today(agent: str, task: str) -> dict[str, str] | None:
     return loaded
 
 
-def stale_reasons(rec: dict) -> list[str]:
-    """Why a record is not what today's code and files would give (empty: current)."""
-    p = resolve(rec)
+def stale_reasons(rec: dict, p: dict) -> list[str]:
+    """Why a record, of resolved provenance `p`, is not what today's code and files would
+    give (empty: current)."""
     if not p:
         return ["no provenance"]
     out = []
@@ -148,12 +147,13 @@ def cell_status(recs: list[dict]) -> tuple[str, list[str]]:
     reasons: Counter = Counter()
     if any(r.get("crashed") for r in recs):
         reasons["crashed jobs (eval --retry-crashed)"] += 1
-    sigs = {signature(r) for r in recs}
+    resolved = [resolve(r) for r in recs]
+    sigs = {signature(p) for p in resolved}
     if len(sigs) > 1:
         codes = sorted({str(s[0]) for s in sigs})
         reasons[f"mixed: {len(sigs)} provenances (code {', '.join(codes)})"] += 1
-    for r in recs:
-        for why in stale_reasons(r):
+    for r, p in zip(recs, resolved, strict=True):
+        for why in stale_reasons(r, p):
             reasons[why] += 1
     if not reasons:
         return "ok", []

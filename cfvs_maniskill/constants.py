@@ -5,12 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
-"""Repository root: holds the user-editable `tasks/`, `assets/` and `agents/` folders."""
-TASKS_DIR = PROJECT_ROOT / "tasks"
-HOLES_DIR = PROJECT_ROOT / "assets" / "holes"
-AGENTS_DIR = PROJECT_ROOT / "agents"
-SENSORS_DIR = PROJECT_ROOT / "sensors"
-"""Sensor profiles (`--sensor NAME`): one YAML file each."""
+"""The checkout the package runs from, if it is one: for git (provenance) only. Tasks, sensor
+profiles, hole objects and weights are found through `cfvs_maniskill.resources`."""
 
 PEG_PROFILES = ("round", "square")
 

@@ -48,8 +48,13 @@ def _git(*args: str) -> str:
 
 
 def file_key(path: Path | str) -> str:
-    """A file's name in records: relative to the project root when inside it (the same on
-    every checkout), else its absolute path."""
+    """A file's name in records: a bundled file by its name in the repository (the same in
+    every checkout and installed wheel), another file of the checkout relative to its root,
+    else its absolute path."""
+    from cfvs_maniskill import resources
+
+    if (bundled := resources.key(path)) is not None:
+        return bundled
     p = Path(path).resolve()
     try:
         return p.relative_to(PROJECT_ROOT).as_posix()

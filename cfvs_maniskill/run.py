@@ -23,7 +23,8 @@ class RunArgs:
     """Run an agent on a peg-in-hole task and report its success rate."""
 
     task: str = "PegInsert6DoF"
-    """Task name or env id (a file in tasks/), e.g. PegInsert3DoF or PegInsert6DoF-v1."""
+    """Task name or env id (bundled, or a file in the user folder's tasks/), e.g.
+    PegInsert3DoF or PegInsert6DoF-v1, or a path to a task file (my_task.yaml)."""
     agent: str = "cfvs"
     """Policy: cfvs (shipped weights), cfvs_no_c2f / cfvs_no_map / cfvs_no_aug / cfvs_aug
     (the paper's ablations), icp / icp_kpts / 3drhd / kovis (its baselines), oracle (reads
@@ -55,14 +56,15 @@ class RunArgs:
     sensor) or a path to a profile file."""
 
 
-def resolve_task(name: str) -> str:
-    """Task name or env id -> env id, or exit 2 listing the valid names."""
-    from cfvs_maniskill import TASKS
+def resolve_task(spec: str) -> tuple[str, dict]:
+    """Task name, env id or task file -> (env id, gym.make keywords), or exit 2 naming what
+    is wrong."""
+    from cfvs_maniskill.envs.lookup import find_task, make_args
 
-    base = name.removesuffix("-v1")
-    if base not in TASKS:
-        _fail(f"unknown task '{name}'; valid: {', '.join(sorted(TASKS))}")
-    return TASKS[base].env_id
+    try:
+        return make_args(find_task(spec))
+    except ValueError as e:
+        _fail(str(e))
 
 
 def main(args: RunArgs) -> list:
@@ -76,7 +78,7 @@ def main(args: RunArgs) -> list:
     from cfvs_maniskill.objects.library import SelectionError
     from cfvs_maniskill.stats import wilson_interval
 
-    env_id = resolve_task(args.task)
+    env_id, task_kwargs = resolve_task(args.task)
     try:
         resolve_agent(args.agent)
     except KeyError as e:
@@ -90,6 +92,7 @@ def main(args: RunArgs) -> list:
     except ValueError as e:
         _fail(str(e))
     kwargs = dict(
+        **task_kwargs,
         **agent_env_kwargs(args.agent),
         objects=list(args.objects) or None,
         assets=[str(a) for a in args.assets],
@@ -102,6 +105,7 @@ def main(args: RunArgs) -> list:
         _fail(str(e))
     except FileNotFoundError as e:
         _fail(str(e))
+    label = env.unwrapped.task.env_id  # a task file's own name, not the generic id
     film = None
     if args.video:
         from cfvs_maniskill.rendering.film import Film
@@ -117,12 +121,12 @@ def main(args: RunArgs) -> list:
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
     results = []
-    bar = tqdm(range(args.episodes), desc=f"{args.agent} on {env_id}", unit="ep", file=sys.stderr)
+    bar = tqdm(range(args.episodes), desc=f"{args.agent} on {label}", unit="ep", file=sys.stderr)
     for i in bar:
         r = run_episode(env, agent, executor, seed=args.seed + i, film=film)
         results.append(r)
         if film is not None:
-            name = f"{env_id.removesuffix('-v1')}_{args.agent}_seed{r.seed}.mp4"
+            name = f"{label.removesuffix('-v1')}_{args.agent}_seed{r.seed}.mp4"
             path = film.write(args.video / name.replace(":", "_").replace("/", "_"))
             tqdm.write(f"  video {path} ({len(film.frames)} frames, {film.render_s:.0f} s)")
         line = (
@@ -142,7 +146,7 @@ def main(args: RunArgs) -> list:
     lo, hi = wilson_interval(k, n)
     servo = sum(r.servo_time_s for r in results) / n
     print(
-        f"{args.agent} on {env_id} ({args.init_error} initial error, {args.sensor} sensor): success {k}/{n} = "
+        f"{args.agent} on {label} ({args.init_error} initial error, {args.sensor} sensor): success {k}/{n} = "
         f"{k / n:.2f} (95% CI {lo:.2f}-{hi:.2f}), mean servo time {servo:.2f} s"
     )
     if args.video:

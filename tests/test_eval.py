@@ -558,10 +558,10 @@ def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys, monkey
         lambda self, task, cfg=None: build(self, task, K.KOVISAgentConfig(weights_dir=tmp_path)),
     )
 
-    skip = unbuildable(["kovis", "cfvs"], ["PegInsert3DoF", "PegInsert4DoF"])
+    skip = unbuildable(["kovis", "cfvs"], {t: t for t in ["PegInsert3DoF", "PegInsert4DoF"]})
     assert skip == {("PegInsert4DoF", "kovis")}
     out = capsys.readouterr().out
     assert "skipping PegInsert4DoF x kovis" in out and "square.pt" in out
     with pytest.raises(SystemExit) as e:
-        unbuildable(["kovis"], ["PegInsert4DoF", "PegInsert6DoF"])
+        unbuildable(["kovis"], {t: t for t in ["PegInsert4DoF", "PegInsert6DoF"]})
     assert e.value.code == 2

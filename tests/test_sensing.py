@@ -12,8 +12,9 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
+from cfvs_maniskill import resources
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, SENSORS_DIR
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.robots.ur5 import CAMERA_UID, camera_pose_in_tool
 from cfvs_maniskill.sensing.depth import apply_stereo, discontinuity_jump, edge_mask, grid_points
 from cfvs_maniskill.sensing.floor import (
@@ -228,7 +229,7 @@ def test_shipped_profiles_load_and_cite_their_numbers():
         assert p.sources, f"{name}: no sources"
     assert load_profile("ideal").depth.model == "iid"
     assert REALISTIC.depth.model == "stereo" and REALISTIC.hand_eye.translation > 0
-    assert load_profile(str(SENSORS_DIR / "realistic.yaml")) == REALISTIC
+    assert load_profile(str(resources.bundled("sensors") / "realistic.yaml")) == REALISTIC
 
 
 @pytest.mark.parametrize(

@@ -9,6 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
+from cfvs_maniskill import resources
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
 from cfvs_maniskill.agents.force_insert import (
     ForceInsertConfig,
@@ -22,7 +23,7 @@ from cfvs_maniskill.agents.force_insert import (
 from cfvs_maniskill.agents.oracle import OracleAgent
 from cfvs_maniskill.agents.registry import make_agent
 from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
-from cfvs_maniskill.constants import PEG_LENGTH, PRE_INSERT_HEIGHT, SQUARE_PEG_SIDE, TASKS_DIR
+from cfvs_maniskill.constants import PEG_LENGTH, PRE_INSERT_HEIGHT, SQUARE_PEG_SIDE
 from cfvs_maniskill.envs.task_config import TaskConfigError, load_task
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.robots.ur5 import chamfered_peg_mesh
@@ -32,11 +33,11 @@ TIGHT = "PegInsert6DoF-0.5mm-v1"
 
 def test_tight_task_files():
     for name, clearance in (("PegInsert6DoF-1mm", 0.001), ("PegInsert6DoF-0.5mm", 0.0005)):
-        cfg = load_task(TASKS_DIR / f"{name}.yaml")
+        cfg = load_task(resources.bundled("tasks") / f"{name}.yaml")
         assert cfg.clearance == clearance and cfg.peg_chamfer == 0.0015 and cfg.dof == 6
         assert cfg.pcm is False  # exact contacts (TaskConfig.pcm)
         assert cfg.contact_offset == 0.0002  # below the play per side (TaskConfig says why)
-    paper = load_task(TASKS_DIR / "PegInsert6DoF.yaml")
+    paper = load_task(resources.bundled("tasks") / "PegInsert6DoF.yaml")
     assert paper.pcm is True and paper.contact_offset == 0.002  # the paper's tasks keep them
     # The spiral's turns are never further apart than the band the peg can drop in from.
     assert spiral_pitch(0.0012, 0.0005, 0.0) == 0.00025

@@ -28,9 +28,10 @@ import numpy as np
 import torch
 import yaml
 
+from cfvs_maniskill import resources
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, camera_in_tcp, insertion_pose
-from cfvs_maniskill.constants import AGENTS_DIR, PRE_INSERT_HEIGHT, hole_half_extent
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, hole_half_extent
 from cfvs_maniskill.nets.checkpoint import load_weights
 from cfvs_maniskill.nets.oakn import weighted_keypoints
 from cfvs_maniskill.perception import labels as L
@@ -46,7 +47,7 @@ from cfvs_maniskill.perception.rim import align_axis, rim_normal
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
 
-WEIGHTS_DIR = AGENTS_DIR / "cfvs"
+WEIGHTS_DIR = resources.bundled("agents") / "cfvs"
 
 
 @dataclass

@@ -22,16 +22,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from cfvs_maniskill import resources
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec
-from cfvs_maniskill.constants import AGENTS_DIR
 from cfvs_maniskill.nets.checkpoint import load_weights
 from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.images import normalise, stereo_images
 from cfvs_maniskill.task_dof import constrain
 
-WEIGHTS_DIR = AGENTS_DIR / "kovis"
+WEIGHTS_DIR = resources.bundled("agents") / "kovis"
 
 
 @dataclass

@@ -19,18 +19,14 @@ def _oracle(env) -> Agent:
 
 def _cfvs(name: str = "cfvs", weights: str = "", **switches) -> Callable[..., Agent]:
     """CFVS with config `switches`; `weights`: a weights folder (its tasks.yaml says which
-    files), relative to agents/cfvs/ or absolute, instead of the shipped default."""
+    files), bundled under agents/cfvs/ or an absolute path, instead of the shipped default."""
 
     def make(task: TaskSpec) -> Agent:
-        from pathlib import Path
-
         from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, CFVSConfig
 
         cfg = dict(switches)
         if weights:
-            cfg["weights_dir"] = (
-                WEIGHTS_DIR / weights if not Path(weights).is_absolute() else Path(weights)
-            )
+            cfg["weights_dir"] = WEIGHTS_DIR / weights  # an absolute path stays itself
         agent = CFVSAgent(task, CFVSConfig(**cfg))
         agent.name = name
         return agent
@@ -118,7 +114,8 @@ PRIVILEGED = {"oracle"}
 
 WEIGHTS_PREFIX = "cfvs@"
 """`cfvs@DIR`: the CFVS agent with the trained networks in DIR (laid out like
-agents/cfvs/: a tasks.yaml, or <peg>/oakn.pt and <peg>/opnv.pt), e.g. weights you trained."""
+agents/cfvs/: a tasks.yaml, or <peg>/oakn.pt and <peg>/opnv.pt), e.g. weights you trained;
+DIR is a path or a folder's name in the user folder's agents/cfvs/ (resources.py)."""
 
 
 def _user_agent(spec: str) -> type[Agent]:
@@ -177,11 +174,15 @@ def resolve_agent(name: str) -> Callable[..., Agent]:
     if name in installed:
         return _user_factory(name, installed[name])
     if name.startswith(WEIGHTS_PREFIX):
-        from pathlib import Path
+        from cfvs_maniskill import resources
 
-        folder = Path(name[len(WEIGHTS_PREFIX) :]).expanduser()
-        if not folder.is_dir():
-            raise KeyError(f"agent '{name}': no weights folder {folder}")
+        spec = name[len(WEIGHTS_PREFIX) :]
+        folder = resources.find("agents", spec, "", sub="cfvs")
+        if folder is None or not folder.is_dir():
+            raise KeyError(
+                f"agent '{name}': no weights folder '{spec}' (a path, or a folder name in "
+                f"{' or '.join(str(d) for d in resources.search_dirs('agents', 'cfvs'))})"
+            )
         return _cfvs(name, weights=str(folder.resolve()))
     if ":" in name:
         return _user_factory(name, name)

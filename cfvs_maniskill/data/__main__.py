@@ -32,6 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     import cfvs_maniskill  # noqa: F401  (render device, task registration)
     from cfvs_maniskill.data.store import DatasetError
+    from cfvs_maniskill.envs.lookup import UnknownTaskError
     from cfvs_maniskill.envs.task_config import TaskConfigError
     from cfvs_maniskill.objects.library import SelectionError
     from cfvs_maniskill.objects.spec import HoleSpecError
@@ -51,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"error: {e}", file=sys.stderr)
                 return 2
             collect(args)
-    except (DatasetError, TaskConfigError, SelectionError, HoleSpecError) as e:
+    except (DatasetError, TaskConfigError, UnknownTaskError, SelectionError, HoleSpecError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

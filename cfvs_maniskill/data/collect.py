@@ -70,7 +70,7 @@ class CollectArgs:
     """Collect a CFVS dataset (HDF5). Resumes if FILE or its FILE.parts/ exist."""
 
     task: str = "PegInsert6DoF"
-    """Task name (a file in tasks/)."""
+    """Task name (bundled or in the user folder) or a path to a task file."""
     kind: str = "coarse"
     """coarse (OAKN: keypoints + confidence), fine (OPN: actions) or kovis (images +
     motion to the goal, for the KOVIS baseline)."""
@@ -160,13 +160,17 @@ class Collector:
     def _env_for(self, group: int):
         import gymnasium as gym
 
+        from cfvs_maniskill.envs.lookup import make_args
+
         if group != self.group:
             if self.env is not None:
                 self.env.close()
             # KOVIS: the stereo imagers, and segmentation for the decoder's targets.
             kovis = dict(obs_mode="rgb+depth+segmentation", stereo=True)
+            env_id, task_kwargs = make_args(self.task)
             self.env = gym.make(
-                f"{self.args.task}-v1",
+                env_id,
+                **task_kwargs,
                 **(kovis if self.args.kind == "kovis" else dict(obs_mode="pointcloud")),
                 objects=tuple(self.groups[group]),
                 assets=tuple(self.assets),
@@ -372,14 +376,11 @@ def _jitter_imagers(u, rng, baseline: float) -> None:
 
 def collect(args: CollectArgs) -> int:
     """Collect until `args.out` holds `args.samples` samples; return the count."""
-    from cfvs_maniskill.envs.task_config import TaskConfigError, load_tasks
+    from cfvs_maniskill.envs.lookup import find_task
 
     if args.kind not in ("coarse", "fine", "kovis"):
         raise store.DatasetError(f"--kind: expected coarse, fine or kovis, got {args.kind!r}")
-    tasks = load_tasks()
-    if args.task not in tasks:
-        raise TaskConfigError(args.task, "task", f"unknown task; valid: {', '.join(tasks)}")
-    task = tasks[args.task]
+    task = find_task(args.task)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     if args.procedural_features and args.procedural_parts:

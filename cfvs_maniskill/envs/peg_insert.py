@@ -24,7 +24,7 @@ from cfvs_maniskill.constants import (
     hole_half_extent,
     peg_half_extent,
 )
-from cfvs_maniskill.envs.task_config import TaskConfig, load_tasks
+from cfvs_maniskill.envs.task_config import TaskConfig, load_task, load_tasks
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.rendering import device
@@ -101,7 +101,7 @@ class PegInsertEnv(BaseEnv):
     (agents/interface.py); the true hole pose in `state` is for the oracle and for training.
     """
 
-    task: TaskConfig  # set on each registered subclass
+    task: TaskConfig | None = None  # set on each registered subclass, or by task_file=
     SUPPORTED_ROBOTS = ["ur5_peg_square", "ur5_peg_round"]
 
     def __init__(
@@ -116,8 +116,16 @@ class PegInsertEnv(BaseEnv):
         render_backend: str | None = None,
         num_envs: int = 1,
         stereo: bool = False,
+        task_file: str | None = None,
         **kwargs,
     ):
+        if task_file is not None:  # this env's task is the file's, whatever the id's
+            self.task = load_task(task_file)
+        if self.task is None:
+            raise ValueError(
+                f"{GENERIC_ID} needs task_file=PATH (a task file like those in tasks/); "
+                f"or make a registered task, e.g. PegInsert6DoF-v1"
+            )
         cfg = self.task
         if stereo and "pointcloud" in str(kwargs.get("obs_mode", "")):
             raise ValueError(
@@ -711,10 +719,18 @@ class PegInsertEnv(BaseEnv):
         return self.compute_dense_reward(obs, action, info) / 2.0
 
 
+GENERIC_ID = "PegInsert-v1"
+"""The task of any task file: `gym.make(GENERIC_ID, task_file=PATH)`."""
+
+
 def register_tasks() -> dict[str, TaskConfig]:
-    """Register `<name>-v1` for every file in `tasks/` (idempotent)."""
+    """Register `<name>-v1` for every bundled task file and every one in the user folder,
+    and GENERIC_ID for a task file given by path (idempotent)."""
     from mani_skill.utils.registration import REGISTERED_ENVS
 
+    if GENERIC_ID not in REGISTERED_ENVS:
+        cls = type("PegInsert", (PegInsertEnv,), {"__doc__": PegInsertEnv.__doc__})
+        register_env(GENERIC_ID, max_episode_steps=None)(cls)
     tasks = load_tasks()
     for name, cfg in tasks.items():
         if cfg.env_id in REGISTERED_ENVS:
@@ -724,4 +740,4 @@ def register_tasks() -> dict[str, TaskConfig]:
     return tasks
 
 
-__all__ = ["PegInsertEnv", "register_tasks"]
+__all__ = ["GENERIC_ID", "PegInsertEnv", "register_tasks"]

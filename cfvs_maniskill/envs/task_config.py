@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -12,10 +13,11 @@ from cfvs_maniskill.constants import (
     DEFAULT_CLEARANCE,
     DEFAULT_HOLE_DEPTH,
     PEG_PROFILES,
-    TASKS_DIR,
     peg_half_extent,
 )
 from cfvs_maniskill.errors import FileFieldError
+
+log = logging.getLogger(__name__)
 
 
 class TaskConfigError(FileFieldError):
@@ -157,6 +159,17 @@ def load_task(path: Path) -> TaskConfig:
     return cfg
 
 
-def load_tasks(directory: Path = TASKS_DIR) -> dict[str, TaskConfig]:
-    """All task files in `directory`, by task name."""
-    return {p.stem: load_task(p) for p in sorted(Path(directory).glob("*.yaml"))}
+def load_tasks(*directories: Path) -> dict[str, TaskConfig]:
+    """All task files in `directories` (default: the bundled ones, then the user folder's,
+    resources.py), by task name; a later file with an earlier one's name is left out."""
+    from cfvs_maniskill import resources
+
+    tasks: dict[str, TaskConfig] = {}
+    for d in directories or resources.search_dirs("tasks"):
+        for p in sorted(Path(d).glob("*.yaml")):
+            if p.stem in tasks:
+                log.warning("task file %s left out: task '%s' is %s", p, p.stem,
+                            tasks[p.stem].source)  # fmt: skip
+                continue
+            tasks[p.stem] = load_task(p)
+    return tasks

@@ -27,6 +27,7 @@ class EvalArgs:
     out: Path = Path("results/eval")
     """Output directory: episodes.jsonl (one line per finished episode) and summary.md."""
     tasks: tuple[str, ...] = ("PegInsert3DoF", "PegInsert4DoF", "PegInsert6DoF")
+    """Task names (bundled or in the user folder) or paths to task files."""
     agents: tuple[str, ...] = ("cfvs",)
     """Agents (see `python -m cfvs_maniskill.run --help`), e.g. cfvs icp icp_kpts 3drhd kovis."""
     objects: tuple[str, ...] = ("test",)
@@ -56,10 +57,28 @@ class EvalArgs:
     force/torque sensor) or paths to profile files."""
 
 
+def task_files(tasks: tuple[str, ...]) -> dict[str, str]:
+    """Task name -> name or file (tasks given as paths); an unknown task or a bad file ->
+    exit 2 naming it."""
+    from cfvs_maniskill.envs.lookup import find_task
+
+    out: dict[str, str] = {}
+    sources: dict[str, str] = {}
+    for t in tasks:
+        try:
+            cfg = find_task(t)
+        except ValueError as e:
+            _fail(str(e))
+        if sources.setdefault(cfg.name, cfg.source) != cfg.source:
+            _fail(f"two tasks named '{cfg.name}': {sources[cfg.name]} and {cfg.source}")
+        out[cfg.name] = t
+    return out
+
+
 def resolve(args: EvalArgs) -> dict[str, list[str]]:
     """Task -> object names; unknown task / agent / object -> exit 2 with the valid names."""
-    from cfvs_maniskill import TASKS
     from cfvs_maniskill.agents.registry import resolve_agent
+    from cfvs_maniskill.envs.lookup import find_task
     from cfvs_maniskill.objects.library import SelectionError, load_library
 
     for a in args.agents:
@@ -72,11 +91,9 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
     lib = load_library([str(a) for a in args.assets])
     out: dict[str, list[str]] = {}
     hosted: dict[str, list[str]] = {}  # named object -> tasks that can use it
-    for t in args.tasks:
-        base = t.removesuffix("-v1")
-        if base not in TASKS:
-            _fail(f"unknown task '{t}'; valid: {', '.join(sorted(TASKS))}")
-        profile = TASKS[base].peg
+    for t in task_files(args.tasks).values():
+        task = find_task(t)
+        base, profile = task.name, task.peg
         names: dict[str, None] = {}
         for sel in args.objects:
             named = sel in lib.specs
@@ -105,13 +122,13 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
     return out
 
 
-def unbuildable(agents: list[str], tasks: list[str]) -> set[tuple[str, str]]:
+def unbuildable(agents: list[str], tasks: dict[str, str]) -> set[tuple[str, str]]:
     """(task, agent) pairs whose agent cannot be built for the task (e.g. no trained
     weights for its peg): each skipped with one line saying why; an agent that can run
-    none of the tasks -> exit 2."""
-    from cfvs_maniskill import TASKS
+    none of the tasks -> exit 2. `tasks`: name -> name or file."""
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.agents.registry import PRIVILEGED, resolve_agent
+    from cfvs_maniskill.envs.lookup import find_task
     from cfvs_maniskill.nets.checkpoint import WeightsError
 
     skip: set[tuple[str, str]] = set()
@@ -119,15 +136,15 @@ def unbuildable(agents: list[str], tasks: list[str]) -> set[tuple[str, str]]:
         if a in PRIVILEGED:
             continue  # built from the env itself: nothing to check beforehand
         reasons = []
-        for t in tasks:
+        for t, spec in tasks.items():
             try:
-                resolve_agent(a)(TaskSpec.of(TASKS[t]))
+                resolve_agent(a)(TaskSpec.of(find_task(spec)))
             except (WeightsError, ValueError) as e:
                 print(f"skipping {t} x {a}: {e}")
                 skip.add((t, a))
                 reasons.append(str(e))
         if tasks and len(reasons) == len(tasks):
-            _fail(f"agent '{a}' can run none of the tasks {tasks}: {reasons[0]}")
+            _fail(f"agent '{a}' can run none of the tasks {list(tasks)}: {reasons[0]}")
     return skip
 
 
@@ -156,7 +173,8 @@ def main(args: EvalArgs) -> int:
 
     objects = resolve(args)
     files = sensor_files(args.sensors)
-    skip = unbuildable(list(args.agents), list(objects))
+    tasks = {n: f for n, f in task_files(args.tasks).items() if n in objects}
+    skip = unbuildable(list(args.agents), tasks)
     jobs = make_jobs(
         objects,
         list(args.agents),
@@ -181,6 +199,7 @@ def main(args: EvalArgs) -> int:
         assets=[str(a) for a in args.assets],
         search_radius=args.search_radius,
         sensor_files=files,
+        task_files=tasks,
     )
     t0 = time.perf_counter()
     t_first = None

@@ -19,6 +19,8 @@ class WorkerConfig:
     search_radius: float = DEFAULT_SEARCH_RADIUS
     sensor_files: dict[str, str] = field(default_factory=dict)
     """Sensor profile name -> the file it came from (profiles given as paths)."""
+    task_files: dict[str, str] = field(default_factory=dict)
+    """Task name -> the file it came from (tasks given as paths)."""
 
 
 class Worker:
@@ -38,10 +40,14 @@ class Worker:
     def _env(self, task: str, env_kwargs: dict, sensor: str):
         import gymnasium as gym
 
+        from cfvs_maniskill.envs.lookup import find_task, make_args
+
         key = (task, tuple(sorted(env_kwargs.items())), sensor)
         if key not in self.envs:
+            env_id, task_kwargs = make_args(find_task(self.cfg.task_files.get(task, task)))
             self.envs[key] = gym.make(
-                f"{task}-v1",
+                env_id,
+                **task_kwargs,
                 **env_kwargs,
                 objects=self.cfg.objects[task],
                 assets=self.cfg.assets,

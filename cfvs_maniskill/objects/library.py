@@ -6,7 +6,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cfvs_maniskill.constants import HOLES_DIR
+from cfvs_maniskill import resources
 from cfvs_maniskill.objects.spec import SPLITS, HoleSpec, HoleSpecError, load_spec
 
 
@@ -66,12 +66,15 @@ def spec_files(directories: Iterable[Path]) -> list[Path]:
 
 
 def load_library(extra_dirs: Iterable[Path | str] = (), include_default: bool = True) -> Library:
-    """Load every spec in the default `assets/holes/` and in `extra_dirs` (`--assets DIR`).
+    """Load every spec in the default library `assets/holes/` (bundled, then the user
+    folder's, resources.py) and in `extra_dirs` (`--assets DIR`).
 
     A file that fails validation is recorded in `errors` and skipped; a name defined twice
     is an error on the later file.
     """
-    dirs = ([HOLES_DIR] if include_default else []) + [Path(d) for d in extra_dirs]
+    dirs = (resources.search_dirs("assets", "holes") if include_default else []) + [
+        Path(d) for d in extra_dirs
+    ]
     lib = Library()
     for f in spec_files(dirs):
         try:

@@ -17,6 +17,7 @@ import subprocess
 from collections import Counter
 from pathlib import Path
 
+from cfvs_maniskill import resources
 from cfvs_maniskill.constants import PROJECT_ROOT
 from cfvs_maniskill.provenance import sha256
 
@@ -50,7 +51,7 @@ def _hole_files() -> dict[str, tuple[str, ...]]:
     from cfvs_maniskill.objects.library import load_library
     from cfvs_maniskill.provenance import file_key
 
-    dirs = [d for d in sorted((PROJECT_ROOT / "assets").iterdir()) if d.is_dir()]
+    dirs = [d for d in sorted(resources.bundled("assets").iterdir()) if d.is_dir()]
     lib = load_library(dirs, include_default=False)
     return {
         n: (file_key(s.source), *([file_key(s.mesh_file)] if s.mesh_file else []))
@@ -94,7 +95,7 @@ def signature(p: dict) -> tuple:
 
 def _today(file: str) -> str | None:
     """sha256 of a recorded file as it is today (None: gone)."""
-    path = Path(file) if Path(file).is_absolute() else PROJECT_ROOT / file
+    path = Path(file) if Path(file).is_absolute() else resources.bundled_file(file)
     return sha256(path) if path.is_file() else None
 
 

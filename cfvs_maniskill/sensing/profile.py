@@ -12,7 +12,7 @@ from typing import Any
 
 import yaml
 
-from cfvs_maniskill.constants import SENSORS_DIR
+from cfvs_maniskill import resources
 from cfvs_maniskill.errors import FileFieldError
 
 DEFAULT_SENSOR = "ideal"
@@ -183,12 +183,15 @@ def load_profile_file(path: Path) -> SensorProfile:
     return profile
 
 
-def available_profiles(directory: Path = SENSORS_DIR) -> list[str]:
-    return sorted(p.stem for p in Path(directory).glob("*.yaml"))
+def available_profiles() -> list[str]:
+    """Profile names: the bundled ones and the user folder's (resources.py)."""
+    names = {p.stem for d in resources.search_dirs("sensors") for p in d.glob("*.yaml")}
+    return sorted(names)
 
 
 def load_profile(name_or_path: str | SensorProfile | None) -> SensorProfile:
-    """A profile by name (`sensors/<name>.yaml`) or by file path; None: the default."""
+    """A profile by name (`sensors/<name>.yaml`, bundled or the user folder's) or by file
+    path; None: the default."""
     if isinstance(name_or_path, SensorProfile):
         return name_or_path
     name = name_or_path or DEFAULT_SENSOR
@@ -197,10 +200,11 @@ def load_profile(name_or_path: str | SensorProfile | None) -> SensorProfile:
         if not path.is_file():
             raise SensorProfileError(path, "<file>", "no such sensor profile file")
         return load_profile_file(path)
-    candidate = SENSORS_DIR / f"{name}.yaml"
-    if not candidate.is_file():
+    candidate = resources.find("sensors", name)
+    if candidate is None or not candidate.is_file():
+        where = " and ".join(str(d) for d in resources.search_dirs("sensors"))
         raise ValueError(
             f"unknown sensor profile '{name}'; available: {', '.join(available_profiles())} "
-            f"(files in {SENSORS_DIR}), or a path to a .yaml profile"
+            f"(files in {where}), or a path to a .yaml profile"
         )
     return load_profile_file(candidate)

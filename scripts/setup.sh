@@ -2,8 +2,8 @@
 # One-time (idempotent) set-up of cfvs_maniskill on a Debian 12 machine as root:
 #   - system libraries SAPIEN's renderer (libx11-6) and open3d (libusb-1.0-0) need,
 #   - a Python 3.11 virtual environment in .venv with the package (editable) and its pins,
-#   - SwiftShader (a CPU Vulkan driver) taken out of Debian's chromium-common .deb, used by
-#     the package only when no GPU is present.
+#   - SwiftShader (a CPU Vulkan driver) taken out of Debian's chromium-common .deb by the
+#     package's `cfvs-maniskill setup-render`, used only when no GPU is present.
 # A second run takes seconds: every step checks first whether it is already done.
 set -euo pipefail
 cd "$(dirname "$(readlink -f "$0")")/.."
@@ -52,18 +52,10 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "$want" > "$stamp"
 fi
 
-# 3. SwiftShader Vulkan ICD (5 MB), unless a GPU render node exists or it is already here.
+# 3. SwiftShader Vulkan ICD (5 MB), unless a GPU render node exists or it is already here:
+#    the package's own set-up command, which pip-install users run themselves.
 if [ ! -f "$SWIFTSHADER_DIR/vk_swiftshader_icd.json" ]; then
-  if ls /dev/nvidia0 /dev/dri/renderD* >/dev/null 2>&1; then
-    log "GPU render node found: SwiftShader not needed"
-  else
-    need_apt chromium-common
-    tmp=$(mktemp -d)
-    log "fetching SwiftShader from Debian's chromium-common package"
-    (cd "$tmp" && apt-get download -qq chromium-common >/dev/null && dpkg -x chromium-common_*.deb x)
-    mkdir -p "$SWIFTSHADER_DIR"
-    cp "$tmp/x/usr/lib/chromium/libvk_swiftshader.so" "$tmp/x/usr/lib/chromium/vk_swiftshader_icd.json" "$SWIFTSHADER_DIR/"
-    rm -rf "$tmp"
-  fi
+  log "setting up the renderer"
+  "$VENV/bin/cfvs-maniskill" setup-render --dest "$SWIFTSHADER_DIR"
 fi
 log "ready: $("$VENV/bin/python" -c 'import cfvs_maniskill.rendering.device as d; print(d.describe())')"

@@ -19,7 +19,7 @@ TASKS = ["PegInsert3DoF-v1", "PegInsert4DoF-v1", "PegInsert6DoF-v1"]
 
 def test_render_device_is_chosen_without_user_setup():
     assert device.configure() in ("gpu", "swiftshader")
-    assert "scripts/setup.sh" in device.missing_message()
+    assert "cfvs-maniskill setup-render" in device.missing_message()
 
 
 @pytest.mark.parametrize("env_id", TASKS)

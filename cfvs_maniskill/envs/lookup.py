@@ -52,3 +52,27 @@ def make_args(cfg: TaskConfig) -> tuple[str, dict]:
     if TASKS.get(cfg.name) is cfg:
         return cfg.env_id, {}
     return GENERIC_ID, {"task_file": cfg.source, "max_episode_steps": cfg.max_episode_steps}
+
+
+def task_of_record(rec: dict) -> TaskConfig:
+    """The task a result record was made on: its registered name, else the task file its
+    provenance names (a task given by path)."""
+    try:
+        return find_task(rec["task"])
+    except UnknownTaskError:
+        file = ((rec.get("provenance") or {}).get("task") or {}).get("file")
+        if not file or not Path(file).is_file():
+            raise
+        return find_task(file)
+
+
+def sensor_of_record(rec: dict) -> str:
+    """The sensor profile a record was made with: its name, else the profile file its
+    provenance names (a profile given by path)."""
+    from cfvs_maniskill.sensing.profile import available_profiles
+
+    name = rec.get("sensor", "ideal")
+    file = ((rec.get("provenance") or {}).get("sensor") or {}).get("file")
+    if name in available_profiles() or not file or not Path(file).is_file():
+        return name
+    return file

@@ -6,7 +6,8 @@ with a GPU render node we leave Vulkan alone so the real GPU is used. Otherwise 
 Vulkan loader at a SwiftShader ICD, so nobody has to export variables by hand.
 
 Environment overrides:
-  CFVS_RENDER_DEVICE=gpu|swiftshader   force the choice.
+  CFVS_RENDER_DEVICE=gpu|swiftshader|none   force the choice (none: physics only, no
+    camera observations; the package then imports without any Vulkan driver).
   CFVS_SWIFTSHADER_ICD=/path/vk_swiftshader_icd.json   use this ICD file.
 """
 
@@ -40,14 +41,17 @@ def swiftshader_icd_candidates() -> list[Path]:
         out.append(Path(os.environ["CFVS_SWIFTSHADER_ICD"]))
     out += [
         Path(sys.prefix) / "share" / "cfvs_maniskill" / "swiftshader" / _ICD_NAME,
-        Path.home() / ".cache" / "cfvs_maniskill" / "swiftshader" / _ICD_NAME,
+        Path(os.environ.get("CFVS_CACHE") or Path.home() / ".cache" / "cfvs_maniskill")
+        / "swiftshader"
+        / _ICD_NAME,
         Path("/usr/lib/chromium") / _ICD_NAME,
     ]
     return out
 
 
 def configure() -> str:
-    """Choose the device once per process; returns "gpu", "swiftshader" or "missing".
+    """Choose the device once per process; returns "gpu", "swiftshader", "none" (forced) or
+    "missing".
 
     Must run before SAPIEN creates its render system. Child processes inherit the
     environment variable we set, so workers need no extra step.
@@ -57,7 +61,9 @@ def configure() -> str:
     # SAPIEN falls back to its bundled Vulkan loader, which works; its warning only confuses.
     warnings.filterwarnings("ignore", message="Failed to find system libvulkan")
     forced = os.environ.get("CFVS_RENDER_DEVICE", "").lower()
-    if os.environ.get("VK_ICD_FILENAMES") and forced != "gpu":
+    if forced == "none":
+        _state.update(kind="none")
+    elif os.environ.get("VK_ICD_FILENAMES") and forced != "gpu":
         icd = os.environ["VK_ICD_FILENAMES"]
         kind = SWIFTSHADER_BACKEND if "swiftshader" in icd.lower() else "gpu"
         _state.update(kind=kind, icd=icd)
@@ -94,9 +100,9 @@ def render_backend(requested: str | None = None) -> str:
     scripts default to "gpu") falls back to SwiftShader with one warning, so the stock
     tools run with their default flags; "none" and explicit devices ("pci:0") pass through.
     """
-    if requested == "none":
-        return requested
     kind = configure()
+    if requested == "none" or kind == "none":
+        return "none"
     if kind == "missing":
         raise RenderDeviceError(missing_message())
     if requested is None:
@@ -118,9 +124,10 @@ def missing_message() -> str:
     return (
         "No Vulkan device for SAPIEN's renderer: no GPU render node (/dev/dri/renderD*, "
         "/dev/nvidia*) and no SwiftShader ICD found. Looked for:\n  "
-        f"{tried}\nRun `bash scripts/setup.sh` (it extracts SwiftShader from Debian's "
-        "chromium-common package), or `apt-get install chromium`, or set "
-        "CFVS_SWIFTSHADER_ICD to a vk_swiftshader_icd.json."
+        f"{tried}\nRun `cfvs-maniskill setup-render` (it copies SwiftShader, a CPU Vulkan "
+        "driver, from Debian's chromium-common package into your cache; scripts/setup.sh "
+        "runs it), or set CFVS_SWIFTSHADER_ICD to a vk_swiftshader_icd.json, or "
+        "CFVS_RENDER_DEVICE=none for physics without cameras."
     )
 
 
@@ -130,4 +137,6 @@ def describe() -> str:
         return f"rendering on SwiftShader (CPU Vulkan, {_state['icd']})"
     if kind == "gpu":
         return "rendering on the system's Vulkan GPU driver"
+    if kind == "none":
+        return "no rendering (CFVS_RENDER_DEVICE=none): physics only"
     return "no rendering device found: " + missing_message()

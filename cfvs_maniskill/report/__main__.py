@@ -27,7 +27,8 @@ class ReportArgs:
     profiles); by default each agent's own records under the ideal sensor only (a video costs about
     10-30 s of rendering on 2 CPU cores: docs/videos.md)."""
     assets: tuple[Path, ...] = ()
-    """Extra hole-object folders or files the results used (for the video replays)."""
+    """Extra hole-object folders or files the results used: their records are reported
+    (without, records on objects outside the default library are left out) and replayed."""
     readme: Path | None = None
     """Also fill the headline table (main agents, tasks and sensor profiles, 15 / 30 cm)
     into this file between its `<!-- report:headline begin/end -->` markers."""
@@ -66,9 +67,20 @@ def main(args: ReportArgs) -> int:
         print(f"error: {args.results}: not a folder of results", file=sys.stderr)
         return 2
     crashed: list[dict] = []
-    records = load_records(args.results, crashed)
+    from cfvs_maniskill.objects.library import spec_files
+
+    try:
+        spec_files(args.assets)
+    except FileNotFoundError as e:
+        print(f"error: --assets: {e}", file=sys.stderr)
+        return 2
+    records = load_records(args.results, crashed, args.assets)
     if not records:
-        print(f"error: {args.results}: no result records (*.jsonl) found", file=sys.stderr)
+        print(
+            f"error: {args.results}: no result records (*.jsonl) on known hole objects found "
+            "(records on your own objects need --assets DIR)",
+            file=sys.stderr,
+        )
         return 2
     if args.check:
         return check(records, crashed, args.readme)
@@ -103,8 +115,8 @@ def main(args: ReportArgs) -> int:
     text = "\n\n".join(
         [
             f"# Report: {args.results} ({len(records)} episodes)",
-            "## Table II: success, ideal sensor (averages over all objects in the results; "
-            "columns: the paper's four)",
+            "## Table II: success, ideal sensor (averages over all objects in the results, then "
+            "per object: the paper's four, or those of the results)",
             tables.table_ii(ideal),
             "## Success per sensor profile (sensors/*.yaml)",
             tables.table_sensors(records),

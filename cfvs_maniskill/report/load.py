@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import sys
 from pathlib import Path
@@ -15,15 +16,34 @@ def init_label(rec: dict) -> str:
     return "small" if rec["init_error_m"] < 0.225 else "large"
 
 
-def load_records(root: Path, crashed: list[dict] | None = None) -> list[dict]:
+@functools.cache
+def _dof(task: str, file: str | None) -> int:
+    from cfvs_maniskill.envs.lookup import task_of_record
+
+    try:
+        return task_of_record({"task": task, "provenance": {"task": {"file": file}}}).dof
+    except ValueError:  # a task (file) gone since: the name says it for ours
+        digit = task.removeprefix("PegInsert")[:1]
+        return int(digit) if digit.isdigit() else 0
+
+
+def task_dof(rec: dict) -> int:
+    """The degrees of freedom of the record's task (its task file's `dof`)."""
+    file = ((rec.get("provenance") or {}).get("task") or {}).get("file")
+    return _dof(rec["task"], file)
+
+
+def load_records(
+    root: Path, crashed: list[dict] | None = None, assets: tuple[Path, ...] = ()
+) -> list[dict]:
     """Records with `label` (the agent, or the folder's name when it names a variant of
     that agent, e.g. results/cfvs_plain) and `init` (small / large).
 
     Crashed jobs (no outcome) go to `crashed` instead. Records on objects outside the
-    default library (extra `--assets`, e.g. the CAD parts in results/cad_parts_v2) are left
-    out: the paper's tables are about its test objects.
+    default library and `assets` (e.g. the CAD parts in results/cad_parts_v2 without
+    `--assets assets/cad_parts`) are left out: a table averages over the objects it names.
     """
-    known = set(load_library().specs)
+    known = set(load_library(assets).specs)
     out, other = [], 0
     crashed = [] if crashed is None else crashed
     for f in sorted(root.rglob("*.jsonl")):
@@ -49,6 +69,7 @@ def load_records(root: Path, crashed: list[dict] | None = None) -> list[dict]:
             elif folder and folder.startswith(label + "_"):
                 label = folder  # a variant's folder: results/cfvs_plain, results/3drhd_plain
             rec["label"], rec["init"] = label, init_label(rec)
+            rec["dof"] = task_dof(rec)
             rec.setdefault("sensor", "ideal")  # records from before sensor profiles
             # A crashed job has no outcome: in no success rate, listed by the report.
             (crashed if rec.get("crashed") else out).append(rec)
@@ -61,7 +82,8 @@ def load_records(root: Path, crashed: list[dict] | None = None) -> list[dict]:
         )
     if other:
         print(
-            f"report: {other} records on objects outside the default library left out",
+            f"report: {other} records on objects outside the default library left out "
+            "(--assets DIR adds a folder of hole objects)",
             file=sys.stderr,
         )
     return out

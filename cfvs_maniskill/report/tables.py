@@ -18,8 +18,13 @@ def _cell(recs: list[dict]) -> str:
     return f"{k / n:.2f} [{lo:.2f}, {hi:.2f}] (n={n})"
 
 
-def _dof(task: str) -> int:
-    return int(task.removeprefix("PegInsert")[0])
+def _task_dof(records: list[dict], task: str) -> int:
+    return next(r["dof"] for r in records if r["task"] == task)
+
+
+def _paper_task(task: str, dof: int) -> bool:
+    """One of the paper's three tasks (not a tight fit, not a task of the user's)."""
+    return task == f"PegInsert{dof}DoF"
 
 
 def table_ii(records: list[dict]) -> str:
@@ -31,24 +36,27 @@ def table_ii(records: list[dict]) -> str:
     labels = sorted({r["label"] for r in records})
     out = []
     for task in tasks:
-        dof = _dof(task)
+        dof = _task_dof(records, task)
+        present = {r["object"] for r in records if r["task"] == task}
+        # The paper's four columns, or the objects of the user's own shapes.
+        objects = paper.OBJECTS if present <= set(paper.OBJECTS) else tuple(sorted(present))
         out += [
             f"### {task}: success, ours [95% Wilson] / paper (15 cm | 30 cm)",
             "",
             "| agent | average 15 cm | paper | average 30 cm | paper | "
-            + " | ".join(paper.OBJECTS)
+            + " | ".join(objects)
             + " |",
-            "|---|---|---|---|---|" + "---|" * len(paper.OBJECTS),
+            "|---|---|---|---|---|" + "---|" * len(objects),
         ]
         for label in labels:
             recs = [r for r in records if r["task"] == task and r["label"] == label]
             if not recs:
                 continue
-            ref = paper.TABLE_II.get(dof, {}).get(label)
+            ref = _paper_row(task, label, dof) if objects == paper.OBJECTS else None
             avg = [_cell([r for r in recs if r["init"] == i]) for i in INITS]
             pav = [f"{ref[0][j]:.2f}" if ref else "-" for j in range(2)]
             objs = []
-            for j, o in enumerate(paper.OBJECTS):
+            for j, o in enumerate(objects):
                 mine = [by[(task, label, o, i)] for i in INITS]
                 frac = " / ".join(
                     f"{sum(r['success'] for r in m) / len(m):.2f}" if m else "-" for m in mine
@@ -64,11 +72,10 @@ def table_ii(records: list[dict]) -> str:
     return "\n".join(out)
 
 
-def _paper_row(task: str, label: str):
+def _paper_row(task: str, label: str, dof: int):
     """The paper's Table II row for an agent on one of its three tasks (None for tasks the
     paper has not, e.g. tight fits; `_plain` labels are the paper's protocol itself)."""
-    dof = _dof(task)
-    if task != f"PegInsert{dof}DoF":
+    if not _paper_task(task, dof):
         return None
     return paper.TABLE_II.get(dof, {}).get(label.removesuffix("_plain"))
 
@@ -93,7 +100,7 @@ def table_sensors(records: list[dict]) -> str:
                 for s in sensors
                 for i in INITS
             ]
-            ref = _paper_row(task, label)
+            ref = _paper_row(task, label, _task_dof(records, task))
             pav = [f"{ref[0][j]:.2f}" if ref else "-" for j in range(2)]
             out.append(f"| {label} | " + " | ".join(cells) + f" | {pav[0]} | {pav[1]} |")
         out.append("")
@@ -120,10 +127,10 @@ def table_compact(records: list[dict]) -> str:
                     k = sum(r["success"] for r in m)
                     parts.append(f"{k}/{len(m)} = {k / len(m):.2f}" if m else "-")
                 cells.append(" / ".join(parts))
-            ref = _paper_row(task, label)
+            dof = _task_dof(records, task)
+            ref = _paper_row(task, label, dof)
             pav = f"{ref[0][0]:.2f} / {ref[0][1]:.2f}" if ref else "-"
-            dof = _dof(task)
-            name = f"{dof}-DoF" if task == f"PegInsert{dof}DoF" else task  # e.g. tight fits
+            name = f"{dof}-DoF" if _paper_task(task, dof) else task  # e.g. tight fits
             out.append(f"| {label} | {name} | " + " | ".join(cells) + f" | {pav} |")
     return "\n".join(out)
 
@@ -134,14 +141,14 @@ def table_iii(records: list[dict]) -> str:
         "| agent | 15 cm | paper | 30 cm | paper |",
         "|---|---|---|---|---|",
     ]
-    labels = sorted({r["label"] for r in records if _dof(r["task"]) == 3})
+    labels = sorted({r["label"] for r in records if r["dof"] == 3})
     for label in labels:
         cells = []
         for i in INITS:
             t = [
                 r["servo_time_s"]
                 for r in records
-                if _dof(r["task"]) == 3 and r["label"] == label and r["init"] == i and r["success"]
+                if r["dof"] == 3 and r["label"] == label and r["init"] == i and r["success"]
             ]
             cells.append(f"{sum(t) / len(t):.1f} s (n={len(t)})" if t else "-")
         ref = paper.TABLE_III.get(label, ("-", "-"))
@@ -153,7 +160,7 @@ def table_iv(records: list[dict]) -> str:
     """6-DoF ablation: success over both distances, per CFVS variant."""
     out = ["| variant | success (6-DoF, 15 + 30 cm) | paper |", "|---|---|---|"]
     for label, ref in paper.TABLE_IV.items():
-        recs = [r for r in records if _dof(r["task"]) == 6 and r["label"] == label]
+        recs = [r for r in records if r["dof"] == 6 and r["label"] == label]
         out.append(f"| {label} | {_cell(recs)} | {ref:.2f} |")
     return "\n".join(out)
 

@@ -67,6 +67,7 @@ def render(
     import cfvs_maniskill  # noqa: F401  (render device, task registration)
     from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
     from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent
+    from cfvs_maniskill.envs.lookup import make_args, sensor_of_record, task_of_record
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.rendering.film import Film
 
@@ -86,14 +87,21 @@ def render(
         env_kwargs = agent_env_kwargs(rec["agent"])
         sensor = rec.get("sensor", "ideal")
         key = (rec["task"], tuple(sorted(env_kwargs.items())), sensor)
-        if key not in envs:
-            envs[key] = gym.make(
-                f"{rec['task']}-v1",
-                **env_kwargs,
-                sensor=sensor,
-                objects=sorted(objects[rec["task"]]),
-                assets=[str(a) for a in assets],
-            )
+        try:
+            if key not in envs:
+                env_id, task_kwargs = make_args(task_of_record(rec))
+                envs[key] = gym.make(
+                    env_id,
+                    **task_kwargs,
+                    **env_kwargs,
+                    sensor=sensor_of_record(rec),
+                    objects=sorted(objects[rec["task"]]),
+                    assets=[str(a) for a in assets],
+                )
+        except ValueError as e:  # a task or profile file gone since, a bad file
+            tqdm.write(f"{path.stem}: not rendered: {e}")
+            videos.append(Video(rec, None, False, f"not rendered: {e}"))
+            continue
         env = envs[key]
         u = env.unwrapped
         u.init_error_m = u.task.init_error[rec["init"]]

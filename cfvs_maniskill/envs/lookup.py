@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cfvs_maniskill.envs.task_config import TaskConfig, TaskConfigError, load_task
+from cfvs_maniskill.envs.task_config import INVALID, TaskConfig, TaskConfigError, load_task
 
 
 class UnknownTaskError(ValueError):
@@ -21,6 +21,8 @@ def find_task(spec: str | Path) -> TaskConfig:
     base = str(spec).removesuffix("-v1")
     if base in TASKS:
         return TASKS[base]
+    if base in INVALID:
+        raise INVALID[base]
     path = Path(spec).expanduser()
     if path.suffix not in (".yaml", ".yml") and not path.exists():
         raise UnknownTaskError(

@@ -31,25 +31,87 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import yaml
+from pydantic import Field
 
 from cfvs_maniskill.constants import PEG_PROFILES
 from cfvs_maniskill.errors import FileFieldError
+from cfvs_maniskill.validation import STRICT, validate
 
 SPLITS = ("train", "test")
-TOP_KEYS = ("name", "split", "hole", "body", "hole_at", "hole_frame", "color")
-HOLE_FRAME_KEYS = ("origin", "axis")
-BODY_FIELDS: dict[str, dict[str, str]] = {
-    # kind -> field -> expected type ("size3", "pos", "int>=3", "path", "pos_opt")
-    "box": {"size": "size3"},
-    "cylinder": {"radius": "pos", "height": "pos"},
-    "prism": {"sides": "int>=3", "radius": "pos", "height": "pos"},
-    "mesh": {"file": "path", "scale": "pos_opt"},
-}
+BODY_KINDS = ("box", "cylinder", "prism", "mesh")
 MESH_SUFFIXES = (".obj", ".stl", ".ply")
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+
+Size = Annotated[float, Field(gt=0.0, le=2.0)]
+"""A body dimension, metres: positive, and a part a UR5 can work on (at most 2 m)."""
+Coord = Annotated[float, Field(ge=-1e4, le=1e4)]
+"""A coordinate in the body's (or the mesh file's own) units."""
+Unit = Annotated[float, Field(ge=0.0, le=1.0)]
+
+
+# The file's schema (validation.py): one dataclass per mapping in it.
+@dataclass(frozen=True)
+class BoxBody:
+    __pydantic_config__ = STRICT
+    size: tuple[Size, Size, Size]
+    """x y z, metres."""
+
+
+@dataclass(frozen=True)
+class CylinderBody:
+    __pydantic_config__ = STRICT
+    radius: Size
+    height: Size
+
+
+@dataclass(frozen=True)
+class PrismBody:
+    __pydantic_config__ = STRICT
+    sides: Annotated[int, Field(ge=3, le=64)]
+    radius: Size
+    """Circumradius, metres."""
+    height: Size
+
+
+@dataclass(frozen=True)
+class MeshBody:
+    __pydantic_config__ = STRICT
+    file: Annotated[str, Field(min_length=1)]
+    """OBJ / STL / PLY, relative to the YAML file."""
+    scale: Annotated[float, Field(gt=0.0, le=1e3)] = 1.0
+
+
+@dataclass(frozen=True)
+class BodyFile:
+    __pydantic_config__ = STRICT
+    box: BoxBody | None = None
+    cylinder: CylinderBody | None = None
+    prism: PrismBody | None = None
+    mesh: MeshBody | None = None
+
+
+@dataclass(frozen=True)
+class HoleFrameFile:
+    __pydantic_config__ = STRICT
+    origin: tuple[Coord, Coord, Coord]
+    axis: tuple[Coord, Coord, Coord]
+
+
+@dataclass(frozen=True)
+class HoleFile:
+    """A hole-object file as written (the contract above)."""
+
+    __pydantic_config__ = STRICT
+    body: BodyFile
+    name: str | None = None
+    split: Literal["train", "test"] = "test"
+    hole: Annotated[tuple[Literal["round", "square"], ...], Field(min_length=1)] = PEG_PROFILES
+    hole_at: tuple[Coord, Coord] | None = None
+    hole_frame: HoleFrameFile | None = None
+    color: Annotated[tuple[Unit, ...], Field(min_length=3, max_length=4)] = (0.6, 0.6, 0.65)
 
 
 class HoleSpecError(FileFieldError):
@@ -90,153 +152,76 @@ class HoleSpec:
         return f"mesh {b['file']} x{b['scale']:g}"
 
 
-def _is_number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool)
-
-
-def _number_list(file: Path, fld: str, v: Any, n: int, positive: bool) -> tuple[float, ...]:
-    what = f"a list of {n} {'positive ' if positive else ''}numbers (metres)"
-    if not isinstance(v, list | tuple) or len(v) != n or not all(_is_number(x) for x in v):
-        raise HoleSpecError(file, fld, f"expected {what}, got {v!r}")
-    if positive and any(x <= 0 for x in v):
-        raise HoleSpecError(file, fld, f"expected {what}, got {v!r} (sizes must be > 0)")
-    return tuple(float(x) for x in v)
-
-
-def _check_body(file: Path, body: Any) -> tuple[str, dict[str, Any]]:
-    kinds = ", ".join(BODY_FIELDS)
-    if not isinstance(body, dict) or not body:
-        raise HoleSpecError(file, "body", f"expected a mapping with exactly one of: {kinds}")
-    unknown = [k for k in body if k not in BODY_FIELDS]
-    if unknown:
-        raise HoleSpecError(
-            file, f"body.{unknown[0]}", f"unknown body kind; expected exactly one of: {kinds}"
-        )
-    if len(body) != 1:
-        raise HoleSpecError(
-            file, "body", f"has {len(body)} body kinds ({', '.join(body)}); expected exactly one"
-        )
-    kind, params = next(iter(body.items()))
-    fields = BODY_FIELDS[kind]
-    if not isinstance(params, dict):
-        raise HoleSpecError(
-            file, f"body.{kind}", f"expected a mapping with fields {', '.join(fields)}"
-        )
-    for k in params:
-        if k not in fields:
-            raise HoleSpecError(
-                file, f"body.{kind}.{k}", f"unknown field; expected one of: {', '.join(fields)}"
-            )
-    out: dict[str, Any] = {}
-    for name, kind_of in fields.items():
-        fld = f"body.{kind}.{name}"
-        if name not in params:
-            if kind_of == "pos_opt":
-                out[name] = 1.0
-                continue
-            raise HoleSpecError(file, fld, "missing; required for a " + kind + " body")
-        v = params[name]
-        if kind_of == "size3":
-            out[name] = _number_list(file, fld, v, 3, positive=True)
-        elif kind_of in ("pos", "pos_opt"):
-            if not _is_number(v) or v <= 0:
-                raise HoleSpecError(file, fld, f"expected a positive number, got {v!r}")
-            out[name] = float(v)
-        elif kind_of == "int>=3":
-            if not isinstance(v, int) or isinstance(v, bool) or v < 3:
-                raise HoleSpecError(file, fld, f"expected an integer >= 3, got {v!r}")
-            out[name] = v
-        elif kind_of == "path":
-            if not isinstance(v, str) or not v:
-                raise HoleSpecError(file, fld, f"expected a file name (string), got {v!r}")
-            if Path(v).suffix.lower() not in MESH_SUFFIXES:
-                raise HoleSpecError(
-                    file, fld, f"expected an {'/'.join(MESH_SUFFIXES)} file, got {v!r}"
-                )
-            path = (file.parent / v).resolve()
-            if not path.is_file():
-                raise HoleSpecError(file, fld, f"mesh file not found: {path}")
-            out[name] = v
-    return kind, out
-
-
-def _check_hole_frame(file: Path, v: Any):
-    keys = ", ".join(HOLE_FRAME_KEYS)
-    if not isinstance(v, dict):
-        raise HoleSpecError(file, "hole_frame", f"expected a mapping with {keys}, got {v!r}")
-    for k in v:
-        if k not in HOLE_FRAME_KEYS:
-            raise HoleSpecError(file, f"hole_frame.{k}", f"unknown field; expected {keys}")
-    for k in HOLE_FRAME_KEYS:
-        if k not in v:
-            raise HoleSpecError(file, f"hole_frame.{k}", f"missing; hole_frame needs {keys}")
-    origin = _number_list(file, "hole_frame.origin", v["origin"], 3, positive=False)
-    axis = _number_list(file, "hole_frame.axis", v["axis"], 3, positive=False)
-    norm = sum(a * a for a in axis) ** 0.5
-    if norm < 1e-9:
-        raise HoleSpecError(
-            file, "hole_frame.axis", f"expected a non-zero direction (out of the part), got {axis}"
-        )
-    return origin, tuple(a / norm for a in axis)
-
-
 def parse_spec(data: Any, file: Path, raw_text: str = "") -> HoleSpec:
     """Validate an already-parsed YAML document. Raises HoleSpecError."""
     if not isinstance(data, dict):
-        raise HoleSpecError(file, "<top>", f"expected a mapping of {', '.join(TOP_KEYS)}")
-    for k in data:
-        if k not in TOP_KEYS:
+        raise HoleSpecError(file, "<top>", "expected a mapping of hole-object fields")
+    if isinstance(data.get("hole"), str):
+        data = {**data, "hole": [data["hole"]]}  # one profile
+    body = data.get("body")
+    if isinstance(body, dict):
+        unknown = [k for k in body if k not in BODY_KINDS]
+        if unknown:
             raise HoleSpecError(
-                file, str(k), f"unknown key; expected one of: {', '.join(TOP_KEYS)}"
+                file,
+                f"body.{unknown[0]}",
+                f"unknown body kind; expected exactly one of {', '.join(BODY_KINDS)}",
             )
-    name = data.get("name", file.stem)
-    if not isinstance(name, str) or not _NAME_RE.match(name):
+    f = validate(HoleFile, data, file, HoleSpecError)
+    kinds = [k for k in BODY_KINDS if getattr(f.body, k) is not None]
+    if len(kinds) != 1:
+        raise HoleSpecError(
+            file,
+            "body",
+            f"has {len(kinds)} body kinds ({', '.join(kinds)}); "
+            f"expected exactly one of {', '.join(BODY_KINDS)}",
+        )
+    kind = kinds[0]
+    params = dict(vars(getattr(f.body, kind)))
+    if kind == "mesh":
+        if Path(params["file"]).suffix.lower() not in MESH_SUFFIXES:
+            raise HoleSpecError(
+                file,
+                "body.mesh.file",
+                f"expected an {'/'.join(MESH_SUFFIXES)} file, got {params['file']!r}",
+            )
+        if not (file.parent / params["file"]).resolve().is_file():
+            raise HoleSpecError(
+                file,
+                "body.mesh.file",
+                f"mesh file not found: {(file.parent / params['file']).resolve()}",
+            )
+    name = file.stem if f.name is None else f.name
+    if not _NAME_RE.match(name):
         raise HoleSpecError(
             file, "name", f"expected a name of letters, digits, _ . -, got {name!r}"
         )
-    split = data.get("split", "test")
-    if split not in SPLITS:
-        raise HoleSpecError(file, "split", f"expected one of {', '.join(SPLITS)}, got {split!r}")
-    hole = data.get("hole", list(PEG_PROFILES))
-    if isinstance(hole, str):
-        hole = [hole]
-    if (
-        not isinstance(hole, list)
-        or not hole
-        or not all(isinstance(h, str) and h in PEG_PROFILES for h in hole)
-    ):
-        raise HoleSpecError(
-            file, "hole", f"expected a non-empty list of {', '.join(PEG_PROFILES)}, got {hole!r}"
-        )
-    if "body" not in data:
-        raise HoleSpecError(file, "body", "missing; expected one of " + ", ".join(BODY_FIELDS))
-    kind, body = _check_body(file, data["body"])
-    hole_at = _number_list(file, "hole_at", data.get("hole_at", [0.0, 0.0]), 2, positive=False)
     hole_frame = None
-    if "hole_frame" in data:
-        if "hole_at" in data:
+    if f.hole_frame is not None:
+        if f.hole_at is not None:
             raise HoleSpecError(
                 file,
                 "hole_frame",
                 "give either hole_at (a point on the top face) or hole_frame (a point and an "
                 "axis on any planar face), not both",
             )
-        hole_frame = _check_hole_frame(file, data["hole_frame"])
-    color = data.get("color", [0.6, 0.6, 0.65])
-    if (
-        not isinstance(color, list | tuple)
-        or len(color) not in (3, 4)
-        or not all(_is_number(c) and 0 <= c <= 1 for c in color)
-    ):
-        raise HoleSpecError(file, "color", f"expected [r, g, b] with values in 0..1, got {color!r}")
+        axis = f.hole_frame.axis
+        norm = sum(a * a for a in axis) ** 0.5
+        if norm < 1e-9:
+            raise HoleSpecError(
+                file,
+                "hole_frame.axis",
+                f"expected a non-zero direction (out of the part), got {list(axis)}",
+            )
+        hole_frame = (f.hole_frame.origin, tuple(a / norm for a in axis))
     return HoleSpec(
         name=name,
-        split=split,
-        hole=tuple(dict.fromkeys(hole)),
+        split=f.split,
+        hole=tuple(dict.fromkeys(f.hole)),
         body_kind=kind,
-        body=body,
-        hole_at=(hole_at[0], hole_at[1]),
-        color=tuple(float(c) for c in color),
+        body=params,
+        hole_at=f.hole_at or (0.0, 0.0),
+        color=f.color,
         source=file,
         raw_text=raw_text,
         hole_frame=hole_frame,

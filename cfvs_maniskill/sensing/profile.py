@@ -6,17 +6,27 @@ fields and profiles are errors that name them."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import yaml
+from pydantic import Field
 
 from cfvs_maniskill import resources
 from cfvs_maniskill.errors import FileFieldError
+from cfvs_maniskill.validation import STRICT, validate
 
 DEFAULT_SENSOR = "ideal"
 DEPTH_MODELS = ("iid", "stereo")
+
+
+def _range(lo: float, hi: float, open_low: bool = False):
+    """A number field from lo (excluded if open_low) to hi: the profile file's schema."""
+    return Annotated[float, Field(gt=lo) if open_low else Field(ge=lo), Field(le=hi)]
+
+
+Prob = _range(0.0, 1.0)
 
 
 class SensorProfileError(FileFieldError):
@@ -28,38 +38,40 @@ class DepthModel:
     """How the wrist camera's depth errs. Lengths in metres, pixels of the *modelled*
     sensor (its own resolution, not the render's)."""
 
-    model: str = "iid"
+    __pydantic_config__ = STRICT
+
+    model: Literal["iid", "stereo"] = "iid"
     """iid: Gaussian noise per point (the paper's protocol). stereo: an active-stereo camera
     (noise in disparity, quantisation, edge artefacts, grazing dropouts, range limits)."""
-    std: float | None = None
+    std: _range(0.0, 0.05) | None = None
     """iid: per-point standard deviation, m (None: the task file's depth_noise_std)."""
-    focal_px: float = 0.0
+    focal_px: _range(0.0, 1e5) = 0.0
     """stereo: the sensor's focal length at its depth resolution, pixels."""
-    baseline: float = 0.0
+    baseline: _range(0.0, 1.0) = 0.0
     """stereo: distance between the two imagers, m."""
-    disparity_noise_px: float = 0.0
+    disparity_noise_px: _range(0.0, 10.0) = 0.0
     """stereo: RMS error of the matched disparity (Intel's "subpixel RMS"), pixels. Axial
     noise is then z^2 * this / (focal_px * baseline): it grows with the square of depth."""
-    disparity_step_px: float = 0.0
+    disparity_step_px: _range(0.0, 1.0) = 0.0
     """stereo: disparity quantisation, pixels (0: none)."""
-    depth_unit: float = 0.0
+    depth_unit: _range(0.0, 0.01) = 0.0
     """Reported depth quantisation, m (0: none)."""
-    lateral_noise_px: float = 0.0
+    lateral_noise_px: _range(0.0, 10.0) = 0.0
     """Gaussian jitter of where a pixel's ray points, sensor pixels."""
-    min_range: float = 0.0
+    min_range: _range(0.0, 10.0) = 0.0
     """No return nearer than this, m."""
-    max_range: float = 10.0
+    max_range: _range(0.0, 100.0, open_low=True) = 10.0
     """No return further than this, m."""
-    edge_jump: float = 0.005
+    edge_jump: _range(0.0, 1.0) = 0.005
     """A pixel whose neighbour's depth differs by more than this (m), or that borders a
     pixel with no return, is at a depth discontinuity."""
-    edge_dropout: float = 0.0
+    edge_dropout: Prob = 0.0
     """Probability that a pixel at a discontinuity returns nothing (stereo occlusion,
     failed left-right check)."""
-    edge_flying: float = 0.0
+    edge_flying: Prob = 0.0
     """Probability that a pixel at a discontinuity returns a depth between the near and the
     far side (a "flying pixel": the matching window straddles the edge)."""
-    max_incidence_deg: float = 90.0
+    max_incidence_deg: _range(0.0, 90.0) = 90.0
     """No return where the surface is seen more obliquely than this (ray to normal)."""
 
 
@@ -68,9 +80,11 @@ class HandEye:
     """The camera mount's calibration error: a rigid transform of this size, in a random
     direction drawn per episode; the robot does not know it."""
 
-    translation: float = 0.0
+    __pydantic_config__ = STRICT
+
+    translation: _range(0.0, 0.1) = 0.0
     """m."""
-    rotation_deg: float = 0.0
+    rotation_deg: _range(0.0, 45.0) = 0.0
     """degrees."""
 
 
@@ -78,14 +92,16 @@ class HandEye:
 class Wrench:
     """The wrist force/torque sensor's errors (per axis, flange frame)."""
 
-    force_noise: float = 0.0
+    __pydantic_config__ = STRICT
+
+    force_noise: _range(0.0, 1000.0) = 0.0
     """N, standard deviation per reading."""
-    torque_noise: float = 0.0
+    torque_noise: _range(0.0, 100.0) = 0.0
     """N m, standard deviation per reading."""
-    force_bias: float = 0.0
+    force_bias: _range(0.0, 1000.0) = 0.0
     """N, standard deviation of an offset fixed for the episode (the sensor's zero drifts;
     a cell tares it out before contact, as the force-guided insertion does)."""
-    torque_bias: float = 0.0
+    torque_bias: _range(0.0, 100.0) = 0.0
     """N m, as force_bias."""
 
 
@@ -94,13 +110,20 @@ class Imager:
     """The wrist camera's image pair, for image-based agents (KOVIS sees both imagers of a
     stereo camera, as its authors did with a RealSense D435's infrared pair)."""
 
-    stereo_baseline: float = 0.05
+    __pydantic_config__ = STRICT
+
+    stereo_baseline: _range(0.0, 1.0, open_low=True) = 0.05
     """Distance from the wrist camera (the left imager) to the right imager, m. Default: the
     RealSense D435's 50 mm (Intel D400 datasheet), the camera KOVIS was built with."""
 
 
 @dataclass(frozen=True)
 class SensorProfile:
+    """A profile file's schema (validation.py) and the profile it gives."""
+
+    __pydantic_config__ = STRICT
+    NOT_IN_FILE = ("name", "source")  # from the file's name and place, not its text
+
     name: str
     description: str = ""
     sources: tuple[str, ...] = ()
@@ -113,71 +136,33 @@ class SensorProfile:
     """The file it was read from."""
 
 
-_SECTIONS = {"depth": DepthModel, "hand_eye": HandEye, "wrench": Wrench, "imager": Imager}
-
-
-def _section(path: Path, name: str, cls, data: Any):
-    if data is None:
-        return cls()
-    if not isinstance(data, dict):
-        raise SensorProfileError(path, name, f"expected a mapping of fields, got {data!r}")
-    known = {f.name: f for f in fields(cls)}
-    out = {}
-    for k, v in data.items():
-        if k not in known:
-            raise SensorProfileError(
-                path, f"{name}.{k}", f"unknown field; expected one of {', '.join(known)}"
-            )
-        if k == "model":
-            if v not in DEPTH_MODELS:
-                raise SensorProfileError(
-                    path, f"{name}.{k}", f"expected one of {', '.join(DEPTH_MODELS)}, got {v!r}"
-                )
-        elif v is None and k == "std":
-            pass
-        elif isinstance(v, bool) or not isinstance(v, int | float) or v < 0:
-            raise SensorProfileError(path, f"{name}.{k}", f"expected a number >= 0, got {v!r}")
-        else:
-            v = float(v)
-        out[k] = v
-    return cls(**out)
+_SECTIONS = ("depth", "hand_eye", "wrench", "imager")
 
 
 def load_profile_file(path: Path) -> SensorProfile:
     path = Path(path)
     try:
         data: Any = yaml.safe_load(path.read_text())
+    except OSError as e:
+        raise SensorProfileError(path, "<file>", f"cannot read: {e.strerror}") from None
     except yaml.YAMLError as e:
         raise SensorProfileError(path, "<top>", f"not valid YAML: {e}") from None
     if not isinstance(data, dict):
         raise SensorProfileError(path, "<top>", "expected a mapping of profile fields")
-    top = {"description", "sources", *_SECTIONS}
-    for k in data:
-        if k not in top:
-            raise SensorProfileError(path, k, f"unknown field; expected one of {', '.join(top)}")
-    sources = data.get("sources") or []
-    if not isinstance(sources, list) or not all(isinstance(s, str) for s in sources):
-        raise SensorProfileError(path, "sources", "expected a list of strings")
-    sections = {k: _section(path, k, cls, data.get(k)) for k, cls in _SECTIONS.items()}
-    profile = SensorProfile(
-        name=path.stem,
-        description=str(data.get("description", "")),
-        sources=tuple(sources),
-        source=str(path),
-        **sections,
+    for reserved in SensorProfile.NOT_IN_FILE:
+        if reserved in data:
+            raise SensorProfileError(path, reserved, "unknown key: the name is the file's")
+    data = {k: v for k, v in data.items() if not (k in _SECTIONS and v is None)}  # defaults
+    profile = validate(
+        SensorProfile, {**data, "name": path.stem, "source": str(path)}, path, SensorProfileError
     )
     d = profile.depth
     if d.model == "stereo" and (d.focal_px <= 0 or d.baseline <= 0):
         raise SensorProfileError(
             path, "depth.focal_px", "a stereo model needs focal_px > 0 and baseline > 0"
         )
-    if profile.imager.stereo_baseline <= 0:
-        raise SensorProfileError(path, "imager.stereo_baseline", "expected a distance > 0, m")
     if d.min_range >= d.max_range:
         raise SensorProfileError(path, "depth.min_range", "expected min_range < max_range")
-    for k in ("edge_dropout", "edge_flying"):
-        if getattr(d, k) > 1:
-            raise SensorProfileError(path, f"depth.{k}", "a probability: expected 0 <= p <= 1")
     if d.edge_dropout + d.edge_flying > 1:
         raise SensorProfileError(path, "depth.edge_flying", "edge_dropout + edge_flying > 1")
     return profile

@@ -1,0 +1,166 @@
+"""The one validation layer for the files a user writes: task files, sensor profiles and hole
+objects. Each file kind is a dataclass whose fields carry their types and ranges; a file's
+YAML is checked against it by pydantic v2 in strict JSON mode (YAML's own types: no string
+read as a number, no 1 read as true, no 128.5 read as 128, no NaN or infinity, no unknown
+key), and the first problem becomes the project's one error shape: file, field, what was
+expected (errors.FileFieldError). Rules between fields stay with each loader."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import types
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+from pydantic import ConfigDict, TypeAdapter, ValidationError
+
+from cfvs_maniskill.errors import FileFieldError
+
+T = TypeVar("T")
+
+STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+"""Every file schema's pydantic config (`__pydantic_config__` on its dataclasses)."""
+
+
+@functools.cache
+def _adapter(schema: type) -> TypeAdapter:
+    return TypeAdapter(schema)
+
+
+def _json_safe(value: Any) -> Any:
+    """YAML values JSON has no word for: NaN and infinities as strings naming them (the
+    schema then rejects them by type, with the value in the message), dates as text."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if value is None or isinstance(value, str | int | float | bool):
+        return value
+    return str(value)
+
+
+def _strip(tp: Any) -> Any:
+    """The type under Annotated[...] and `| None`."""
+    while True:
+        if typing.get_origin(tp) is typing.Annotated:
+            tp = typing.get_args(tp)[0]
+        elif typing.get_origin(tp) in (typing.Union, types.UnionType):
+            args = [a for a in typing.get_args(tp) if a is not type(None)]
+            if len(args) != 1:
+                return tp
+            tp = args[0]
+        else:
+            return tp
+
+
+def _type_at(schema: type, loc: tuple) -> Any:
+    """The schema's type at `loc` (None where it cannot tell)."""
+    tp: Any = schema
+    for part in loc:
+        tp = _strip(tp)
+        if dataclasses.is_dataclass(tp):
+            tp = typing.get_type_hints(tp, include_extras=True).get(str(part))
+        elif typing.get_origin(tp) is tuple and isinstance(part, int):
+            args = typing.get_args(tp)
+            tp = args[0] if args[-1] is Ellipsis else args[min(part, len(args) - 1)]
+        elif typing.get_origin(tp) is dict:
+            tp = typing.get_args(tp)[1]
+        else:
+            return None
+    return _strip(tp)
+
+
+def _fixed_length(tp: Any) -> int | None:
+    args = typing.get_args(tp) if typing.get_origin(tp) is tuple else ()
+    return len(args) if args and args[-1] is not Ellipsis else None
+
+
+def _fields_at(schema: type, loc: tuple) -> list[str]:
+    """The field names a key at `loc` may have (for "unknown key" messages)."""
+    cls = _type_at(schema, loc)
+    if not dataclasses.is_dataclass(cls):
+        return []
+    hidden = getattr(cls, "NOT_IN_FILE", ())
+    return [f.name for f in dataclasses.fields(cls) if f.init and f.name not in hidden]
+
+
+def _message(schema: type, err: dict) -> str:
+    kind, loc = err["type"], err["loc"]
+    got = err.get("input")
+    if kind in ("unexpected_keyword_argument", "extra_forbidden"):
+        known = _fields_at(schema, loc[:-1])
+        return "unknown key" + (f"; expected one of {', '.join(known)}" if known else "")
+    if kind in ("missing", "missing_argument"):
+        return "missing; a value is required"
+    if kind == "fixed_length":
+        return f"expected a list of {err['n']} values, got {got!r}"
+    ctx = err.get("ctx") or {}
+    bounds = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<",
+              "less_than_equal": "<="}  # fmt: skip
+    if kind in bounds:
+        limit = next(iter(ctx.values()))
+        text = f"a value {bounds[kind]} {limit:g}" if isinstance(limit, float) else (
+            f"a value {bounds[kind]} {limit}")  # fmt: skip
+    elif kind == "too_short":
+        text = f"at least {ctx.get('min_length')} item(s)"
+    elif kind == "too_long":
+        text = f"at most {ctx.get('max_length')} item(s)"
+    elif kind in TYPE_WORDS:
+        text = TYPE_WORDS[kind]
+    else:
+        text = err["msg"].removeprefix("Input should be ").removeprefix("Value error, ")
+    return f"expected {text}, got {got!r}"
+
+
+def _at(data: Any, loc: tuple) -> Any:
+    for part in loc:
+        try:
+            data = data[part]
+        except (KeyError, IndexError, TypeError):
+            return None
+    return data
+
+
+TYPE_WORDS = {
+    "int_type": "an integer",
+    "float_type": "a number",
+    "bool_type": "true or false",
+    "string_type": "a string",
+    "dict_type": "a mapping",
+    "tuple_type": "a list",
+    "list_type": "a list",
+    "dataclass_type": "a mapping of fields",
+}
+
+
+def validate(
+    schema: type[T],
+    data: dict[str, Any],
+    file: Path | str,
+    error: type[FileFieldError] = FileFieldError,
+) -> T:
+    """`data` (a parsed YAML mapping) as a `schema` instance, or `error(file, field, what
+    was expected)` for its first problem."""
+    if not isinstance(data, dict):
+        raise error(file, "<top>", f"expected a mapping, got {data!r}")
+    try:
+        return _adapter(schema).validate_json(json.dumps(_json_safe(data)), strict=True)
+    except ValidationError as e:
+        err = e.errors()[0]
+        loc = tuple(err["loc"])
+        # A list of the wrong length for a fixed one ([x, y] for x y z): name the list.
+        n = _fixed_length(_type_at(schema, loc[:-1])) if loc and isinstance(loc[-1], int) else None
+        if n is not None and err["type"] in ("missing", "too_long"):
+            loc = loc[:-1]
+            err = {"type": "fixed_length", "n": n, "input": _at(data, loc), "loc": loc}
+        elif err["type"] in ("too_long", "tuple_type") and _fixed_length(_type_at(schema, loc)):
+            n = _fixed_length(_type_at(schema, loc))
+            err = {"type": "fixed_length", "n": n, "input": _at(data, loc), "loc": loc}
+        field = ".".join(str(p) for p in loc) or "<top>"
+        raise error(file, field, _message(schema, err)) from None

@@ -1,0 +1,156 @@
+"""The package as a pip-install user gets it: the wheel is built, installed with the lock
+into a fresh virtual environment outside the repository, and used from another folder
+(gym.make on every task, a CFVS episode with the shipped weights, a task file and a hole
+folder of the user's, the report on their records). About 4 minutes: pip installs the
+whole locked environment from the package index."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from .conftest import ROOT, run_cli
+
+pytestmark = pytest.mark.slow
+
+BLOCK = "split: test\nbody:\n  box: {size: [0.15, 0.13, 0.07]}\ncolor: [0.4, 0.5, 0.6]\n"
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
+    dist = tmp_path_factory.mktemp("dist")
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+         "-w", str(dist), str(ROOT)],
+        check=True, capture_output=True, timeout=600,
+    )  # fmt: skip
+    shutil.rmtree(ROOT / "build", ignore_errors=True)  # setuptools' scratch folder
+    return next(dist.glob("cfvs_maniskill-*.whl"))
+
+
+@pytest.fixture(scope="module")
+def user(tmp_path_factory, wheel):
+    """A fresh venv with the wheel, a home and a cache of its own, and a work folder."""
+    root = tmp_path_factory.mktemp("user")
+    venv = root / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
+    subprocess.run(
+        [str(venv / "bin" / "pip"), "install", "-q", "-c", str(ROOT / "constraints.txt"),
+         str(wheel)],
+        check=True, capture_output=True, timeout=1800,
+    )  # fmt: skip
+    cache = root / "cache"
+    cache.mkdir()
+    # The hole geometry this machine has built already (a content-hash cache): only saves
+    # the convex decompositions, changes no result.
+    holes = Path(os.environ.get("CFVS_CACHE") or Path.home() / ".cache" / "cfvs_maniskill")
+    if (holes / "holes").is_dir():
+        (cache / "holes").symlink_to(holes / "holes")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("VK_", "CFVS_"))}
+    env.update(HOME=str(root / "home"), CFVS_CACHE=str(cache), PYTHONPATH="")
+    work = root / "work"
+    work.mkdir()
+    return {"venv": venv, "env": env, "work": work}
+
+
+def _run(user, *args: str, timeout: float = 900) -> subprocess.CompletedProcess:
+    exe = args[0] if args[0].startswith("cfvs-") else "python"
+    return subprocess.run(
+        [str(user["venv"] / "bin" / exe), *args[exe != "python" :]],
+        cwd=user["work"], env=user["env"], capture_output=True, text=True, timeout=timeout,
+    )  # fmt: skip
+
+
+def test_wheel_carries_what_a_user_needs_and_nothing_else(wheel):
+    names = zipfile.ZipFile(wheel).namelist()
+    bundled = [n for n in names if "/bundled/" in n]
+    for need in ("tasks/PegInsert6DoF.yaml", "sensors/realistic.yaml",
+                 "assets/holes/cylinder.yaml", "assets/cad_parts/LICENSE.md",
+                 "agents/cfvs/square/oakn.pt", "agents/cfvs/tasks.yaml",
+                 "agents/kovis/round.pt"):  # fmt: skip
+        assert f"cfvs_maniskill/bundled/{need}" in names
+    shipped = {
+        f"cfvs_maniskill/bundled/{p.relative_to(ROOT).as_posix()}"
+        for p in (ROOT / "agents").rglob("*.pt")
+        if "_stage1" not in p.name and ".step" not in p.name  # training intermediates
+    }
+    assert shipped <= set(bundled) and len(shipped) >= 10
+    assert not [n for n in names if n.startswith(("results/", "tests/", "docs/"))]
+    assert not [n for n in bundled if "_stage1" in n or n.endswith(".py")]
+    assert "cfvs_maniskill_setup.py" in names
+    assert wheel.stat().st_size < 20e6
+
+
+def test_import_without_a_renderer_names_the_set_up_command(user):
+    r = _run(user, "-c", "import cfvs_maniskill")
+    assert r.returncode != 0
+    assert "RenderDeviceError" in r.stderr and "cfvs-maniskill setup-render" in r.stderr
+
+
+def test_installed_package_runs_from_another_folder(user, tmp_path):
+    # 1. The renderer, as a user without apt access would: from a folder holding it.
+    r = _run(user, "cfvs-maniskill", "setup-render",
+             "--source", str(Path(sys.prefix) / "share" / "cfvs_maniskill" / "swiftshader"))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert (Path(user["env"]["CFVS_CACHE"]) / "swiftshader" / "vk_swiftshader_icd.json").is_file()
+
+    # 2. Every task registers and builds, from the bundled files.
+    probe = (
+        "import json, cfvs_maniskill as c, gymnasium as gym\n"
+        "from cfvs_maniskill.rendering import device\n"
+        "out = {'device': device.describe(), 'file': c.__file__, 'tasks': {}}\n"
+        "for name, t in sorted(c.TASKS.items()):\n"
+        "    env = gym.make(t.env_id, obs_mode='pointcloud')\n"
+        "    obs, _ = env.reset(seed=1)\n"
+        "    out['tasks'][name] = int(obs['pointcloud']['xyzw'].shape[1])\n"
+        "    env.close()\n"
+        "print(json.dumps(out))\n"
+    )
+    r = _run(user, "-c", probe)
+    assert r.returncode == 0, r.stderr[-3000:]
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert str(user["venv"]) in got["file"] and "SwiftShader" in got["device"]
+    assert set(got["tasks"]) == {p.stem for p in (ROOT / "tasks").glob("*.yaml")}
+    assert all(n > 0 for n in got["tasks"].values())
+
+    # 3. One CFVS episode with the shipped weights: the same record as from the checkout.
+    args = ("cfvs_maniskill.run", "--task", "PegInsert3DoF", "--episodes", "1", "--seed", "500")
+    r = _run(user, "-m", *args, "--out", "cfvs.jsonl")
+    assert r.returncode == 0, r.stderr[-3000:]
+    wheel_rec = json.loads((user["work"] / "cfvs.jsonl").read_text())
+    r = run_cli(*args, "--out", str(tmp_path / "checkout.jsonl"))
+    assert r.returncode == 0, r.stderr[-3000:]
+    repo_rec = json.loads((tmp_path / "checkout.jsonl").read_text())
+    assert wheel_rec["success"]
+    for k in ("success", "object", "seed", "servo_time_s", "move_residuals"):
+        assert wheel_rec[k] == repo_rec[k], k
+    for k in ("weights", "sensor", "task", "object"):  # the same files, by the same names
+        assert wheel_rec["provenance"][k] == repo_rec["provenance"][k], k
+    assert wheel_rec["provenance"]["code"] == "0.1.0"  # the installed version, not git
+
+    # 4. A copied, edited task file and a folder of the user's own hole shapes, by path.
+    holes = user["work"] / "my_holes"
+    holes.mkdir()
+    (holes / "my_block.yaml").write_text(BLOCK)
+    text = (ROOT / "tasks" / "PegInsert3DoF.yaml").read_text()
+    (user["work"] / "my_task.yaml").write_text(text + "objects: [my_block]\n")
+    r = _run(user, "-m", "cfvs_maniskill.assets", "check", "my_holes")
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "my_block" in r.stdout
+    r = _run(user, "-m", "cfvs_maniskill.eval", "--out", "ev", "--tasks", "my_task.yaml",
+             "--agents", "oracle", "cfvs", "--objects", "my_block", "--assets", "my_holes",
+             "--episodes-per-object", "1", "--init-errors", "small", "--workers", "1")  # fmt: skip
+    assert r.returncode == 0, r.stderr[-3000:]
+    r = _run(user, "-m", "cfvs_maniskill.report", "ev", "--out", "rep", "--assets", "my_holes",
+             "--no-videos")  # fmt: skip
+    assert r.returncode == 0, r.stderr[-3000:]
+    report = (user["work"] / "rep" / "README.md").read_text()
+    assert "### my_task" in report and "my_block" in report
+    assert "| cfvs | my_task | ideal | 1 |" in report

@@ -32,10 +32,7 @@ def _adapter(schema: type) -> TypeAdapter:
 
 
 def _json_safe(value: Any) -> Any:
-    """YAML values JSON has no word for: NaN and infinities as strings naming them (the
-    schema then rejects them by type, with the value in the message), dates as text."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return repr(value)
+    """YAML values JSON has no word for (dates, ...) as text: the schema then names them."""
     if isinstance(value, dict):
         return {str(k): _json_safe(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
@@ -43,6 +40,17 @@ def _json_safe(value: Any) -> Any:
     if value is None or isinstance(value, str | int | float | bool):
         return value
     return str(value)
+
+
+def _non_finite(value: Any, loc: tuple = ()) -> tuple | None:
+    """Where a NaN or an infinity is (YAML's .nan, .inf): no field takes one."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return loc
+    if isinstance(value, dict | list | tuple):
+        for k, v in value.items() if isinstance(value, dict) else enumerate(value):
+            if (found := _non_finite(v, (*loc, k))) is not None:
+                return found
+    return None
 
 
 def _strip(tp: Any) -> Any:
@@ -149,6 +157,9 @@ def validate(
     was expected)` for its first problem."""
     if not isinstance(data, dict):
         raise error(file, "<top>", f"expected a mapping, got {data!r}")
+    if (where := _non_finite(data)) is not None:
+        got = _at(data, where)
+        raise error(file, ".".join(map(str, where)), f"expected a finite number, got {got}")
     try:
         return _adapter(schema).validate_json(json.dumps(_json_safe(data)), strict=True)
     except ValidationError as e:

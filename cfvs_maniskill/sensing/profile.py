@@ -157,10 +157,11 @@ def load_profile_file(path: Path) -> SensorProfile:
         SensorProfile, {**data, "name": path.stem, "source": str(path)}, path, SensorProfileError
     )
     d = profile.depth
-    if d.model == "stereo" and (d.focal_px <= 0 or d.baseline <= 0):
-        raise SensorProfileError(
-            path, "depth.focal_px", "a stereo model needs focal_px > 0 and baseline > 0"
-        )
+    for k in ("focal_px", "baseline"):
+        if d.model == "stereo" and getattr(d, k) <= 0:
+            raise SensorProfileError(
+                path, f"depth.{k}", "a stereo model needs focal_px > 0 and baseline > 0"
+            )
     if d.min_range >= d.max_range:
         raise SensorProfileError(path, "depth.min_range", "expected min_range < max_range")
     if d.edge_dropout + d.edge_flying > 1:

@@ -50,11 +50,12 @@ def diagnose(args: DiagnoseArgs) -> dict:
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.agents.kovis import KOVISAgent
     from cfvs_maniskill.agents.registry import agent_env_kwargs
-    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, PROJECT_ROOT
+    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
     from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.nets.checkpoint import file_sha256
     from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
     from cfvs_maniskill.perception import labels as L
+    from cfvs_maniskill.provenance import file_key
     from cfvs_maniskill.task_dof import constrain
 
     torch.set_num_threads(1)
@@ -128,7 +129,7 @@ def diagnose(args: DiagnoseArgs) -> dict:
     out = {
         "task": args.task,
         "sensor": args.sensor,
-        "weights": str(weights).replace(f"{PROJECT_ROOT}/", ""),
+        "weights": file_key(weights),
         "weights_sha256": file_sha256(weights),
         "episodes": episodes,
         "success": {

@@ -5,4 +5,5 @@ cd "$(dirname "$(readlink -f "$0")")/.."
 bash scripts/setup.sh
 .venv/bin/ruff check .
 .venv/bin/ruff format --check .
-.venv/bin/python -m pytest -q "$@"
+# Two workers (pytest-xdist) on the 2 cores; tests marked xdist_group share one worker.
+.venv/bin/python -m pytest -q -n 2 --dist loadgroup "$@"

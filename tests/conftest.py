@@ -14,6 +14,12 @@ import cfvs_maniskill  # noqa: F401  (picks the render device, registers envs)
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def pytest_collection_modifyitems(config, items):
+    """Slow tests first: under pytest-xdist (scripts/test.sh runs two workers) the long
+    ones then overlap with the many short ones instead of ending the run alone."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture(scope="session")
 def make_env():
     """Cached gym.make: one env per distinct argument set for the whole session."""

@@ -216,6 +216,7 @@ def test_unknown_names_exit_2_listing_valid_ones(tmp_path, flag, value, valid):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one Ray at a time on this machine
 def test_ray_backend_retries_killed_workers_and_records_once(reference):
     """Local Ray instance, 2 actors; both are killed after the first result (one of them
     mid-episode): their episodes go to fresh actors and every job is recorded once, with
@@ -252,6 +253,7 @@ def test_ray_backend_retries_killed_workers_and_records_once(reference):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one Ray at a time on this machine
 def test_ray_backend_on_a_two_node_cluster(reference, tmp_path):
     """`--backend ray --address` on a two-node `ray.cluster_utils.Cluster` with one CPU
     per node: the two actors can only run on different nodes, so finishing at all shows

@@ -88,13 +88,13 @@ def test_wheel_carries_what_a_user_needs_and_nothing_else(wheel):
     assert wheel.stat().st_size < 20e6
 
 
-def test_import_without_a_renderer_names_the_set_up_command(user):
+def test_installed_package_runs_from_another_folder(user, tmp_path):
+    # 0. Without a renderer, importing the package says which command sets one up. (One
+    # test for the whole flow: the fresh environment takes minutes to install.)
     r = _run(user, "-c", "import cfvs_maniskill")
     assert r.returncode != 0
     assert "RenderDeviceError" in r.stderr and "cfvs-maniskill setup-render" in r.stderr
 
-
-def test_installed_package_runs_from_another_folder(user, tmp_path):
     # 1. The renderer, as a user without apt access would: from a folder holding it.
     r = _run(user, "cfvs-maniskill", "setup-render",
              "--source", str(Path(sys.prefix) / "share" / "cfvs_maniskill" / "swiftshader"))  # fmt: skip

@@ -14,10 +14,17 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any
 
-import numpy as np
+# The tool's poses from the robot's drawing, part of what an agent may use.
+from cfvs_maniskill.robots.poses import camera_in_tcp, flange_pose, insertion_pose
 
-from cfvs_maniskill import geometry as G
-from cfvs_maniskill.constants import PEG_LENGTH
+__all__ = [
+    "ALLOWED_OBS",
+    "TaskSpec",
+    "camera_in_tcp",
+    "flange_pose",
+    "insertion_pose",
+    "robot_view",
+]
 
 
 @dataclass(frozen=True)
@@ -74,32 +81,3 @@ def robot_view(obs: Any) -> dict:
             for cam, data in obs["sensor_data"].items()
         }
     return out
-
-
-def insertion_pose(peg: str, hole: np.ndarray, depth: float, ref: np.ndarray) -> np.ndarray:
-    """Tcp pose with the tip `depth` m below the opening of the hole frame `hole` (negative:
-    above it), pointing into the hole. For a square peg the tool's x is the hole axis
-    (x, y, -x, -y) nearest to `ref`'s x (the current tool), so the wrist never turns more
-    than 45 deg; a round peg keeps `ref`'s x."""
-    z = -hole[:3, 2]
-    x_hint = ref[:3, 0]
-    if peg == "square":
-        cands = [hole[:3, 0], hole[:3, 1], -hole[:3, 0], -hole[:3, 1]]
-        x_hint = max(cands, key=lambda c: float(c @ x_hint))
-    return G.make(G.frame_with_z(z, x_hint), hole[:3, 3] + depth * z)
-
-
-def flange_pose(tcp: np.ndarray) -> np.ndarray:
-    """The flange's (tool0's) 4x4 pose from the peg tip frame's: PEG_LENGTH back along the
-    tool axis (the peg is rigid on the flange, same axes)."""
-    T = np.array(tcp, dtype=np.float64, copy=True)
-    T[:3, 3] -= PEG_LENGTH * T[:3, 2]
-    return T
-
-
-def camera_in_tcp() -> np.ndarray:
-    """The wrist camera's optical centre in the peg-tip (tcp) frame, from the robot's
-    drawing (its nominal mount: the calibration the robot believes, not the true one)."""
-    from cfvs_maniskill.robots.ur5 import CAMERA_OFFSET
-
-    return np.asarray(CAMERA_OFFSET, dtype=np.float64) - np.array([0.0, 0.0, PEG_LENGTH])

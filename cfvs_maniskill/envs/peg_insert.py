@@ -15,7 +15,6 @@ from mani_skill.utils.structs.types import SceneConfig, SimConfig
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.interface import flange_pose, insertion_pose
 from cfvs_maniskill.constants import (
     PRE_INSERT_HEIGHT,
     SUCCESS_LATERAL_MARGIN,
@@ -28,6 +27,7 @@ from cfvs_maniskill.envs.task_config import TaskConfig, load_task, load_tasks
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.rendering import device
+from cfvs_maniskill.robots.poses import flange_pose, insertion_pose
 from cfvs_maniskill.robots.ur5 import (
     CAMERA_FOV,
     CAMERA_UID,

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import tyro
 
-from cfvs_maniskill.agents.interface import flange_pose
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+from cfvs_maniskill.robots.poses import flange_pose
 from cfvs_maniskill.sensing.model import mount_errors
 from cfvs_maniskill.sensing.profile import load_profile
 

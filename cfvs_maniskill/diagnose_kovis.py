@@ -43,25 +43,21 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def diagnose(args: DiagnoseArgs) -> dict:
-    import gymnasium as gym
     import torch
 
     from cfvs_maniskill.agents.executor import Executor
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.agents.kovis import KOVISAgent
-    from cfvs_maniskill.agents.registry import agent_env_kwargs
     from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
-    from cfvs_maniskill.episode import run_episode
     from cfvs_maniskill.nets.checkpoint import file_sha256
     from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
     from cfvs_maniskill.perception import labels as L
     from cfvs_maniskill.provenance import file_key
+    from cfvs_maniskill.session import Session, make_env
     from cfvs_maniskill.task_dof import constrain
 
     torch.set_num_threads(1)
-    env = gym.make(
-        f"{args.task}-v1", **agent_env_kwargs("kovis"), objects=["test"], sensor=args.sensor
-    )
+    env = make_env(args.task, "kovis", objects=["test"], sensor=args.sensor)
     u = env.unwrapped
     rows: list[dict] = []
 
@@ -90,14 +86,14 @@ def diagnose(args: DiagnoseArgs) -> dict:
 
     agent = Probe(TaskSpec.of(u.task))
     weights = agent.cfg.weights_dir / f"{agent.task.peg}.pt"
-    ex = Executor(env)
+    session = Session(env, agent, Executor(env))  # the probe, not a registry agent
     episodes = []
     for init in ("small", "large"):
         u.init_error_m = u.task.init_error[init]
         for i in tqdm(range(args.episodes), desc=f"kovis diagnosis {init}", unit="episode"):
             agent.episode = len(episodes)
             n0 = len(rows)
-            r = run_episode(env, agent, ex, args.seed + i)
+            r = session.episode(args.seed + i)
             last = rows[-1] if len(rows) > n0 else None
             episodes.append(
                 {

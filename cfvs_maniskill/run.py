@@ -56,29 +56,26 @@ class RunArgs:
     sensor) or a path to a profile file."""
 
 
-def resolve_task(spec: str) -> tuple[str, dict]:
-    """Task name, env id or task file -> (env id, gym.make keywords), or exit 2 naming what
-    is wrong."""
-    from cfvs_maniskill.envs.lookup import find_task, make_args
+def resolve_task(spec: str) -> None:
+    """Task name, env id or task file: exit 2 naming what is wrong when it is none."""
+    from cfvs_maniskill.envs.lookup import find_task
 
     try:
-        return make_args(find_task(spec))
+        find_task(spec)
     except ValueError as e:
         _fail(str(e))
 
 
 def main(args: RunArgs) -> list:
-    import gymnasium as gym
     from tqdm import tqdm
 
-    from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-    from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent, resolve_agent
-    from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.agents.registry import resolve_agent
     from cfvs_maniskill.eval.results import ResultsError, append
     from cfvs_maniskill.objects.library import SelectionError
+    from cfvs_maniskill.session import make_env, open_session
     from cfvs_maniskill.stats import wilson_interval
 
-    env_id, task_kwargs = resolve_task(args.task)
+    resolve_task(args.task)
     try:
         resolve_agent(args.agent)
     except KeyError as e:
@@ -91,16 +88,15 @@ def main(args: RunArgs) -> list:
         load_profile(args.sensor)
     except ValueError as e:
         _fail(str(e))
-    kwargs = dict(
-        **task_kwargs,
-        **agent_env_kwargs(args.agent),
-        objects=list(args.objects) or None,
-        assets=[str(a) for a in args.assets],
-        init_error=args.init_error,
-        sensor=args.sensor,
-    )
     try:
-        env = gym.make(env_id, **kwargs)
+        env = make_env(
+            args.task,
+            args.agent,
+            objects=args.objects or None,
+            assets=args.assets,
+            sensor=args.sensor,
+            init_error=args.init_error,
+        )
     except SelectionError as e:
         _fail(str(e))
     except FileNotFoundError as e:
@@ -111,11 +107,10 @@ def main(args: RunArgs) -> list:
         from cfvs_maniskill.rendering.film import Film
 
         film = Film(env, args.agent)
-    executor = Executor(env, ExecutorConfig(search_radius=args.search_radius))
     from cfvs_maniskill.nets.checkpoint import WeightsError
 
     try:
-        agent = make_agent(args.agent, env)
+        session = open_session(env, args.agent, args.search_radius)
     except WeightsError as e:
         _fail(str(e))
     if args.out:
@@ -123,7 +118,7 @@ def main(args: RunArgs) -> list:
     results = []
     bar = tqdm(range(args.episodes), desc=f"{args.agent} on {label}", unit="ep", file=sys.stderr)
     for i in bar:
-        r = run_episode(env, agent, executor, seed=args.seed + i, film=film)
+        r = session.episode(args.seed + i, film=film)
         results.append(r)
         if film is not None:
             name = f"{label.removesuffix('-v1')}_{args.agent}_seed{r.seed}.mp4"

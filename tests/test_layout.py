@@ -42,7 +42,7 @@ LAYERS = {
     "envs": 2, "": 2,
     "perception": 3, "nets": 3,
     "agents": 4,
-    "episode": 5, "run": 5, "eval": 5, "report": 5, "data": 5, "train": 5, "train_kovis": 5,
+    "episode": 5, "session": 5, "run": 5, "eval": 5, "report": 5, "data": 5, "train": 5, "train_kovis": 5,
     "assets": 5, "tool": 5, "diagnose_kovis": 5, "cli": 5, "stats": 5, "rendering.film": 5,
 }  # fmt: skip
 """docs/architecture.md's layers: a module (or its package) -> its layer; "" is the

@@ -35,46 +35,41 @@ class Worker:
         torch.set_num_threads(1)
         self.cfg = cfg
         self.envs: dict[tuple, object] = {}
-        self.agents: dict[tuple[str, str, str], tuple] = {}
+        self.sessions: dict[tuple[str, str, str], object] = {}
 
-    def _env(self, task: str, env_kwargs: dict, sensor: str):
-        import gymnasium as gym
+    def _env(self, task: str, agent: str, sensor: str):
+        """One env per (task, the agent's env options, sensor): agents that see the same
+        observations share it."""
+        from cfvs_maniskill.agents.registry import agent_env_kwargs
+        from cfvs_maniskill.session import make_env
 
-        from cfvs_maniskill.envs.lookup import find_task, make_args
-
-        key = (task, tuple(sorted(env_kwargs.items())), sensor)
+        key = (task, tuple(sorted(agent_env_kwargs(agent).items())), sensor)
         if key not in self.envs:
-            env_id, task_kwargs = make_args(find_task(self.cfg.task_files.get(task, task)))
-            self.envs[key] = gym.make(
-                env_id,
-                **task_kwargs,
-                **env_kwargs,
+            self.envs[key] = make_env(
+                self.cfg.task_files.get(task, task),
+                agent,
                 objects=self.cfg.objects[task],
                 assets=self.cfg.assets,
                 sensor=self.cfg.sensor_files.get(sensor, sensor),
             )
         return self.envs[key]
 
-    def _agent(self, task: str, name: str, sensor: str):
-        from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-        from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent
+    def _session(self, task: str, agent: str, sensor: str):
+        from cfvs_maniskill.session import open_session
 
-        key = (task, name, sensor)
-        if key not in self.agents:
-            env = self._env(task, agent_env_kwargs(name), sensor)
-            executor = Executor(env, ExecutorConfig(search_radius=self.cfg.search_radius))
-            self.agents[key] = (env, make_agent(name, env), executor)
-        return self.agents[key]
+        key = (task, agent, sensor)
+        if key not in self.sessions:
+            env = self._env(task, agent, sensor)
+            self.sessions[key] = open_session(env, agent, self.cfg.search_radius)
+        return self.sessions[key]
 
     def run(self, job: Job) -> dict:
         """One episode -> its result record (the run command's fields + the job's)."""
-        from cfvs_maniskill.episode import run_episode
-
         t0 = time.perf_counter()
-        env, agent, executor = self._agent(job.task, job.agent, job.sensor)
-        u = env.unwrapped
+        session = self._session(job.task, job.agent, job.sensor)
+        u = session.env.unwrapped
         u.init_error_m = u.task.init_error[job.init_error]
-        r = run_episode(env, agent, executor, job.seed, options={"object": job.object})
+        r = session.episode(job.seed, options={"object": job.object})
         rec = r.to_json()
         rec.update(
             key=job.key,
@@ -82,7 +77,7 @@ class Worker:
             episode=job.episode,
             agent=job.agent,
             search_radius_m=self.cfg.search_radius,  # the executor setting: labels variants
-            insertion=executor.insertion_mode,  # position (paper) or force-guided
+            insertion=session.executor.insertion_mode,  # position (paper) or force-guided
             wall_time_s=round(time.perf_counter() - t0, 3),  # incl. any env / agent set-up
         )
         return rec

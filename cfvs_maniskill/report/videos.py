@@ -61,15 +61,13 @@ def render(
     """Replay each picked episode, filmed (`rendering/film.py`, as `run --video`), into
     OUT/<name>.mp4; files already there are kept (a second report run renders nothing
     again)."""
-    import gymnasium as gym
     from tqdm import tqdm
 
     import cfvs_maniskill  # noqa: F401  (render device, task registration)
-    from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
-    from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent
-    from cfvs_maniskill.envs.lookup import make_args, sensor_of_record, task_of_record
-    from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.agents.registry import agent_env_kwargs
+    from cfvs_maniskill.envs.lookup import sensor_of_record, task_of_record
     from cfvs_maniskill.rendering.film import Film
+    from cfvs_maniskill.session import make_env, open_session
 
     out.mkdir(parents=True, exist_ok=True)
     envs: dict[tuple, object] = {}
@@ -89,14 +87,12 @@ def render(
         key = (rec["task"], tuple(sorted(env_kwargs.items())), sensor)
         try:
             if key not in envs:
-                env_id, task_kwargs = make_args(task_of_record(rec))
-                envs[key] = gym.make(
-                    env_id,
-                    **task_kwargs,
-                    **env_kwargs,
+                envs[key] = make_env(
+                    task_of_record(rec).source,
+                    rec["agent"],
                     sensor=sensor_of_record(rec),
                     objects=sorted(objects[rec["task"]]),
-                    assets=[str(a) for a in assets],
+                    assets=assets,
                 )
         except ValueError as e:  # a task or profile file gone since, a bad file
             tqdm.write(f"{path.stem}: not rendered: {e}")
@@ -108,10 +104,8 @@ def render(
         radius = rec.get("search_radius_m", search_radius)
         film = Film(env, rec["label"])
         try:
-            agent = make_agent(rec["agent"], env)
-            executor = Executor(env, ExecutorConfig(search_radius=radius))
-            options = {"object": rec["object"]}
-            r = run_episode(env, agent, executor, rec["seed"], options=options, film=film)
+            session = open_session(env, rec["agent"], radius)
+            r = session.episode(rec["seed"], options={"object": rec["object"]}, film=film)
         except Exception as e:  # e.g. missing weights, an object this env lacks
             tqdm.write(f"{path.stem}: not rendered: {e}")
             videos.append(Video(rec, None, False, f"not rendered: {e}"))

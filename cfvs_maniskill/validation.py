@@ -67,7 +67,7 @@ def _strip(tp: Any) -> Any:
             return tp
 
 
-def _type_at(schema: type, loc: tuple) -> Any:
+def type_at(schema: type, loc: tuple) -> Any:
     """The schema's type at `loc` (None where it cannot tell)."""
     tp: Any = schema
     for part in loc:
@@ -91,7 +91,7 @@ def _fixed_length(tp: Any) -> int | None:
 
 def _fields_at(schema: type, loc: tuple) -> list[str]:
     """The field names a key at `loc` may have (for "unknown key" messages)."""
-    cls = _type_at(schema, loc)
+    cls = type_at(schema, loc)
     if not dataclasses.is_dataclass(cls):
         return []
     hidden = getattr(cls, "NOT_IN_FILE", ())
@@ -166,12 +166,12 @@ def validate(
         err = e.errors()[0]
         loc = tuple(err["loc"])
         # A list of the wrong length for a fixed one ([x, y] for x y z): name the list.
-        n = _fixed_length(_type_at(schema, loc[:-1])) if loc and isinstance(loc[-1], int) else None
+        n = _fixed_length(type_at(schema, loc[:-1])) if loc and isinstance(loc[-1], int) else None
         if n is not None and err["type"] in ("missing", "too_long"):
             loc = loc[:-1]
             err = {"type": "fixed_length", "n": n, "input": _at(data, loc), "loc": loc}
-        elif err["type"] in ("too_long", "tuple_type") and _fixed_length(_type_at(schema, loc)):
-            n = _fixed_length(_type_at(schema, loc))
+        elif err["type"] in ("too_long", "tuple_type") and _fixed_length(type_at(schema, loc)):
+            n = _fixed_length(type_at(schema, loc))
             err = {"type": "fixed_length", "n": n, "input": _at(data, loc), "loc": loc}
         field = ".".join(str(p) for p in loc) or "<top>"
         raise error(file, field, _message(schema, err)) from None

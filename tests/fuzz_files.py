@@ -23,7 +23,7 @@ from cfvs_maniskill.envs.task_config import TaskConfig, load_task
 from cfvs_maniskill.errors import FileFieldError
 from cfvs_maniskill.objects.spec import HoleFile, load_spec
 from cfvs_maniskill.sensing.profile import SensorProfile, load_profile_file
-from cfvs_maniskill.validation import _type_at
+from cfvs_maniskill.validation import type_at
 
 
 def _wrong_type(field_type) -> object:
@@ -107,7 +107,7 @@ def _fields(kind: Kind) -> list[tuple]:
     """Every field of the base file, and every schema field the base leaves out."""
     paths = _leaves(kind.base)
     for path in list(paths) + [()]:
-        tp = _type_at(kind.schema, path)
+        tp = type_at(kind.schema, path)
         if dataclasses.is_dataclass(tp):
             hidden = getattr(tp, "NOT_IN_FILE", ())
             for f in dataclasses.fields(tp):
@@ -133,7 +133,7 @@ def _set(data: dict, path: tuple, value) -> dict:
 def run_case(kind: Kind, path: tuple, bad: str) -> tuple[str, str]:
     """(outcome, message): outcome "named" (an error naming the file and the field or a
     field inside it), "loaded", "misnamed" (an error naming another field) or "crash"."""
-    field_type = _type_at(kind.schema, path)
+    field_type = type_at(kind.schema, path)
     make = BAD[bad]
     value = None if make is None else make(field_type)
     with tempfile.TemporaryDirectory() as tmp:
@@ -162,7 +162,7 @@ def expected(path: tuple, bad: str, kind: Kind) -> set[str]:
     if bad == "negative":
         if dotted in NEGATIVE_ALLOWED:
             return {"named", "loaded"}
-        field_type = _type_at(kind.schema, path)
+        field_type = type_at(kind.schema, path)
         return {"named"} if field_type is not str else {"named", "loaded"}
     return {"named", "loaded"}  # missing: an error for a required field, else the default
 

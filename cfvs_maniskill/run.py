@@ -56,12 +56,12 @@ class RunArgs:
     sensor) or a path to a profile file."""
 
 
-def resolve_task(spec: str) -> None:
-    """Task name, env id or task file: exit 2 naming what is wrong when it is none."""
+def resolve_task(spec: str):
+    """Task name, env id or task file -> its TaskConfig, or exit 2 naming what is wrong."""
     from cfvs_maniskill.envs.lookup import find_task
 
     try:
-        find_task(spec)
+        return find_task(spec)
     except ValueError as e:
         _fail(str(e))
 
@@ -75,7 +75,7 @@ def main(args: RunArgs) -> list:
     from cfvs_maniskill.session import make_env, open_session
     from cfvs_maniskill.stats import wilson_interval
 
-    resolve_task(args.task)
+    task = resolve_task(args.task)
     try:
         resolve_agent(args.agent)
     except KeyError as e:
@@ -90,7 +90,7 @@ def main(args: RunArgs) -> list:
         _fail(str(e))
     try:
         env = make_env(
-            args.task,
+            task,
             args.agent,
             objects=args.objects or None,
             assets=args.assets,
@@ -101,7 +101,7 @@ def main(args: RunArgs) -> list:
         _fail(str(e))
     except FileNotFoundError as e:
         _fail(str(e))
-    label = env.unwrapped.task.env_id  # a task file's own name, not the generic id
+    label = task.env_id  # a task file's own name, not the generic id
     film = None
     if args.video:
         from cfvs_maniskill.rendering.film import Film

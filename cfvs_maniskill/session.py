@@ -9,10 +9,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
+from cfvs_maniskill.envs.task_config import TaskConfig
 
 
 def make_env(
-    task: str,
+    task: str | TaskConfig,
     agent: str,
     *,
     objects: list[str] | tuple[str, ...] | None = None,
@@ -20,7 +21,7 @@ def make_env(
     sensor: str = "ideal",
     **options: Any,
 ):
-    """The env of `task` (a name, env id or task file) for `agent`: the observation mode
+    """The env of `task` (a name, env id, task file or TaskConfig) for `agent`: the observation mode
     and env options the agent needs (registry.agent_env_kwargs), the hole objects (None:
     the task's list) and the sensor profile (a name or a file); `options` go to gym.make."""
     import gymnasium as gym
@@ -28,7 +29,7 @@ def make_env(
     from cfvs_maniskill.agents.registry import agent_env_kwargs
     from cfvs_maniskill.envs.lookup import find_task, make_args
 
-    env_id, task_kwargs = make_args(find_task(task))
+    env_id, task_kwargs = make_args(task if isinstance(task, TaskConfig) else find_task(task))
     return gym.make(
         env_id,
         **task_kwargs,

@@ -13,9 +13,11 @@ import json
 import math
 import types
 import typing
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
+import yaml
 from pydantic import ConfigDict, TypeAdapter, ValidationError
 
 from cfvs_maniskill.errors import FileFieldError
@@ -109,12 +111,8 @@ def _message(schema: type, err: dict) -> str:
     if kind == "fixed_length":
         return f"expected a list of {err['n']} values, got {got!r}"
     ctx = err.get("ctx") or {}
-    bounds = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<",
-              "less_than_equal": "<="}  # fmt: skip
-    if kind in bounds:
-        limit = next(iter(ctx.values()))
-        text = f"a value {bounds[kind]} {limit:g}" if isinstance(limit, float) else (
-            f"a value {bounds[kind]} {limit}")  # fmt: skip
+    if kind in BOUNDS:
+        text = f"a value {BOUNDS[kind]} {next(iter(ctx.values())):g}"
     elif kind == "too_short":
         text = f"at least {ctx.get('min_length')} item(s)"
     elif kind == "too_long":
@@ -134,6 +132,13 @@ def _at(data: Any, loc: tuple) -> Any:
             return None
     return data
 
+
+BOUNDS = {
+    "greater_than": ">",
+    "greater_than_equal": ">=",
+    "less_than": "<",
+    "less_than_equal": "<=",
+}
 
 TYPE_WORDS = {
     "int_type": "an integer",
@@ -157,7 +162,7 @@ def validate(
     was expected)` for its first problem."""
     if not isinstance(data, dict):
         raise error(file, "<top>", f"expected a mapping, got {data!r}")
-    if (where := _non_finite(data)) is not None:
+    if (where := _non_finite(data)) is not None:  # JSON has no word for them
         got = _at(data, where)
         raise error(file, ".".join(map(str, where)), f"expected a finite number, got {got}")
     try:
@@ -166,12 +171,37 @@ def validate(
         err = e.errors()[0]
         loc = tuple(err["loc"])
         # A list of the wrong length for a fixed one ([x, y] for x y z): name the list.
-        n = _fixed_length(type_at(schema, loc[:-1])) if loc and isinstance(loc[-1], int) else None
-        if n is not None and err["type"] in ("missing", "too_long"):
-            loc = loc[:-1]
-            err = {"type": "fixed_length", "n": n, "input": _at(data, loc), "loc": loc}
-        elif err["type"] in ("too_long", "tuple_type") and _fixed_length(type_at(schema, loc)):
+        n = None
+        if loc and isinstance(loc[-1], int) and err["type"] in ("missing", "too_long"):
+            n = _fixed_length(type_at(schema, loc[:-1]))
+            loc = loc[:-1] if n is not None else loc
+        if n is None and err["type"] in ("too_long", "tuple_type"):
             n = _fixed_length(type_at(schema, loc))
+        if n is not None:
             err = {"type": "fixed_length", "n": n, "input": _at(data, loc), "loc": loc}
         field = ".".join(str(p) for p in loc) or "<top>"
         raise error(file, field, _message(schema, err)) from None
+
+
+def validate_file(
+    schema: type[T],
+    path: Path | str,
+    error: type[FileFieldError],
+    prepare: Callable[[dict], dict] = lambda data: data,
+) -> T:
+    """A YAML file as a `schema` instance (`validate`). The schema's NOT_IN_FILE fields
+    (`name`, `source`) come from the file's name and place, never from its text; `prepare`
+    turns the parsed mapping into the schema's shape (shorthands a file may use)."""
+    path = Path(path)
+    try:
+        data: Any = yaml.safe_load(path.read_text())
+    except OSError as e:
+        raise error(path, "<file>", f"cannot read: {e.strerror}") from None
+    except yaml.YAMLError as e:
+        raise error(path, "<top>", f"not valid YAML: {e}") from None
+    if not isinstance(data, dict):
+        raise error(path, "<top>", "expected a mapping of fields")
+    for reserved in getattr(schema, "NOT_IN_FILE", ()):
+        if reserved in data:
+            raise error(path, reserved, "unknown key: the name is the file's")
+    return validate(schema, {**prepare(data), "name": path.stem, "source": str(path)}, path, error)

@@ -549,6 +549,7 @@ def test_an_installed_package_names_its_agent_through_the_entry_point_group(tmp_
 def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys, monkeypatch, tmp_path):
     """KOVIS given weights for the round peg only: its square-peg tasks are skipped with a
     line naming the missing file; asked for square-peg tasks alone, eval exits 2."""
+    from cfvs_maniskill import TASKS
     from cfvs_maniskill.agents import kovis as K
     from cfvs_maniskill.eval.__main__ import unbuildable
 
@@ -560,10 +561,10 @@ def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys, monkey
         lambda self, task, cfg=None: build(self, task, K.KOVISAgentConfig(weights_dir=tmp_path)),
     )
 
-    skip = unbuildable(["kovis", "cfvs"], {t: t for t in ["PegInsert3DoF", "PegInsert4DoF"]})
+    skip = unbuildable(["kovis", "cfvs"], {t: TASKS[t] for t in ["PegInsert3DoF", "PegInsert4DoF"]})
     assert skip == {("PegInsert4DoF", "kovis")}
     out = capsys.readouterr().out
     assert "skipping PegInsert4DoF x kovis" in out and "square.pt" in out
     with pytest.raises(SystemExit) as e:
-        unbuildable(["kovis"], {t: t for t in ["PegInsert4DoF", "PegInsert6DoF"]})
+        unbuildable(["kovis"], {t: TASKS[t] for t in ["PegInsert4DoF", "PegInsert6DoF"]})
     assert e.value.code == 2

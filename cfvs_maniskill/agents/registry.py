@@ -60,9 +60,9 @@ EARLIER_FINE_LOOP = {"tol_translation": 0.0015, "vote_gate": 0.0, "final_correct
 comparison variants keep it, so their committed records stay what the code does."""
 
 BEFORE_FACE_HEIGHT = {"face_height": False, "face_guard": False}
-"""OPN's height for the opening (the agents before session 19): the comparison variants
-keep it, so their committed records stay what the code does; `cfvs_opn_height` is the
-agent they compare with."""
+"""OPN's height for the opening instead of the face's: the comparison variants keep it, so
+their committed records stay what the code does; `cfvs_opn_height` is the agent they
+compare with (docs/results.md has their history)."""
 
 AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs": _cfvs(),
@@ -74,17 +74,16 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs_aug": _cfvs("cfvs_aug", augmentation=True, rim_plane=False, **EARLIER_FINE_LOOP),
     # The fine stage as the paper has it: OPN's own tilt, not the face around the opening.
     "cfvs_no_rim": _cfvs("cfvs_no_rim", rim_plane=False),
-    # The opening's height as OPN gives it (the agent of session 18).
+    # The opening's height as OPN gives it, not the face's.
     "cfvs_opn_height": _cfvs("cfvs_opn_height", **BEFORE_FACE_HEIGHT),
-    # Every fine estimate taken, with or without a face round it (session 19's first change).
+    # Every fine estimate taken, with or without a face round it.
     "cfvs_no_face_guard": _cfvs("cfvs_no_face_guard", face_guard=False),
-    # The estimate's position and yaw as OPN gives them, without the opening fit (the
-    # agent of session 16).
+    # The estimate's position and yaw as OPN gives them, without the opening fit.
     "cfvs_no_opening": _cfvs("cfvs_no_opening", opening_fit=False, **BEFORE_FACE_HEIGHT),
     # Always the approach yaw nearest the tool's, whatever stands between the camera and
-    # the opening (the agent of session 17).
+    # the opening.
     "cfvs_fixed_yaw": _cfvs("cfvs_fixed_yaw", clear_view=False, **BEFORE_FACE_HEIGHT),
-    # The rim fit on the 20 mm ring always, never the narrow one first (session 17-18).
+    # The rim fit on the 20 mm ring always, never the narrow one first.
     "cfvs_wide_ring": _cfvs("cfvs_wide_ring", rim_narrow_ring=False, **BEFORE_FACE_HEIGHT),
     # The face's plane by least median of squares alone, without the parallel-planes check.
     "cfvs_no_parallel": _cfvs("cfvs_no_parallel", rim_parallel_planes=False, **BEFORE_FACE_HEIGHT),

@@ -56,16 +56,24 @@ def make_args(cfg: TaskConfig) -> tuple[str, dict]:
     return GENERIC_ID, {"task_file": cfg.source, "max_episode_steps": cfg.max_episode_steps}
 
 
-def task_of_record(rec: dict) -> TaskConfig:
-    """The task a result record was made on: its registered name, else the task file its
-    provenance names (a task given by path)."""
+def recorded_file(rec: dict, kind: str) -> str | None:
+    """The file a result record's provenance names for `kind` ("task", "sensor")."""
+    return ((rec.get("provenance") or {}).get(kind) or {}).get("file")
+
+
+def task_named(name: str, file: str | None) -> TaskConfig:
+    """A recorded task: its registered name, else its file (a task given by path)."""
     try:
-        return find_task(rec["task"])
+        return find_task(name)
     except UnknownTaskError:
-        file = ((rec.get("provenance") or {}).get("task") or {}).get("file")
         if not file or not Path(file).is_file():
             raise
         return find_task(file)
+
+
+def task_of_record(rec: dict) -> TaskConfig:
+    """The task a result record was made on (`task_named`)."""
+    return task_named(rec["task"], recorded_file(rec, "task"))
 
 
 def sensor_of_record(rec: dict) -> str:
@@ -74,7 +82,7 @@ def sensor_of_record(rec: dict) -> str:
     from cfvs_maniskill.sensing.profile import available_profiles
 
     name = rec.get("sensor", "ideal")
-    file = ((rec.get("provenance") or {}).get("sensor") or {}).get("file")
+    file = recorded_file(rec, "sensor")
     if name in available_profiles() or not file or not Path(file).is_file():
         return name
     return file

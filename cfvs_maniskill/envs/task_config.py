@@ -5,9 +5,8 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
-import yaml
 from pydantic import Field
 
 from cfvs_maniskill.constants import (
@@ -17,7 +16,7 @@ from cfvs_maniskill.constants import (
     peg_half_extent,
 )
 from cfvs_maniskill.errors import FileFieldError
-from cfvs_maniskill.validation import STRICT, validate
+from cfvs_maniskill.validation import STRICT, validate_file
 
 log = logging.getLogger(__name__)
 
@@ -109,23 +108,14 @@ class TaskConfig:
         return f"{self.name}-v1"
 
 
-def load_task(path: Path) -> TaskConfig:
-    try:
-        data: Any = yaml.safe_load(Path(path).read_text())
-    except OSError as e:
-        raise TaskConfigError(path, "<file>", f"cannot read: {e.strerror}") from None
-    except yaml.YAMLError as e:
-        raise TaskConfigError(path, "<top>", f"not valid YAML: {e}") from None
-    if not isinstance(data, dict):
-        raise TaskConfigError(path, "<top>", "expected a mapping of task fields")
-    for reserved in TaskConfig.NOT_IN_FILE:
-        if reserved in data:
-            raise TaskConfigError(path, reserved, "unknown key: the task's name is its file's")
+def _one_name_as_list(data: dict) -> dict:
     if isinstance(data.get("objects"), str):
-        data["objects"] = [data["objects"]]  # one name or split
-    cfg = validate(
-        TaskConfig, {**data, "name": Path(path).stem, "source": str(path)}, path, TaskConfigError
-    )
+        return {**data, "objects": [data["objects"]]}  # one name or split
+    return data
+
+
+def load_task(path: Path) -> TaskConfig:
+    cfg = validate_file(TaskConfig, path, TaskConfigError, _one_name_as_list)
     if not (0 <= cfg.peg_chamfer <= 0.25 * peg_half_extent(cfg.peg)):
         raise TaskConfigError(
             path,

@@ -57,28 +57,26 @@ class EvalArgs:
     force/torque sensor) or paths to profile files."""
 
 
-def task_files(tasks: tuple[str, ...]) -> dict[str, str]:
-    """Task name -> name or file (tasks given as paths); an unknown task or a bad file ->
-    exit 2 naming it."""
+def find_tasks(tasks: tuple[str, ...]) -> dict:
+    """Task name -> TaskConfig of each task given by name or file; an unknown task, a bad
+    file or two tasks of one name -> exit 2 naming it."""
     from cfvs_maniskill.envs.lookup import find_task
 
-    out: dict[str, str] = {}
-    sources: dict[str, str] = {}
+    out: dict = {}
     for t in tasks:
         try:
             cfg = find_task(t)
         except ValueError as e:
             _fail(str(e))
-        if sources.setdefault(cfg.name, cfg.source) != cfg.source:
-            _fail(f"two tasks named '{cfg.name}': {sources[cfg.name]} and {cfg.source}")
-        out[cfg.name] = t
+        if out.setdefault(cfg.name, cfg).source != cfg.source:
+            _fail(f"two tasks named '{cfg.name}': {out[cfg.name].source} and {cfg.source}")
     return out
 
 
-def resolve(args: EvalArgs) -> dict[str, list[str]]:
-    """Task -> object names; unknown task / agent / object -> exit 2 with the valid names."""
+def resolve(args: EvalArgs, tasks: dict | None = None) -> dict[str, list[str]]:
+    """Task -> object names; unknown task / agent / object -> exit 2 with the valid names.
+    `tasks`: find_tasks(args.tasks), when the caller has it already."""
     from cfvs_maniskill.agents.registry import resolve_agent
-    from cfvs_maniskill.envs.lookup import find_task
     from cfvs_maniskill.objects.library import SelectionError, load_library
 
     for a in args.agents:
@@ -91,8 +89,7 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
     lib = load_library([str(a) for a in args.assets])
     out: dict[str, list[str]] = {}
     hosted: dict[str, list[str]] = {}  # named object -> tasks that can use it
-    for t in task_files(args.tasks).values():
-        task = find_task(t)
+    for task in (tasks or find_tasks(args.tasks)).values():
         base, profile = task.name, task.peg
         names: dict[str, None] = {}
         for sel in args.objects:
@@ -122,13 +119,12 @@ def resolve(args: EvalArgs) -> dict[str, list[str]]:
     return out
 
 
-def unbuildable(agents: list[str], tasks: dict[str, str]) -> set[tuple[str, str]]:
+def unbuildable(agents: list[str], tasks: dict) -> set[tuple[str, str]]:
     """(task, agent) pairs whose agent cannot be built for the task (e.g. no trained
     weights for its peg): each skipped with one line saying why; an agent that can run
-    none of the tasks -> exit 2. `tasks`: name -> name or file."""
+    none of the tasks -> exit 2. `tasks`: name -> TaskConfig."""
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.agents.registry import PRIVILEGED, resolve_agent
-    from cfvs_maniskill.envs.lookup import find_task
     from cfvs_maniskill.nets.checkpoint import WeightsError
 
     skip: set[tuple[str, str]] = set()
@@ -136,9 +132,9 @@ def unbuildable(agents: list[str], tasks: dict[str, str]) -> set[tuple[str, str]
         if a in PRIVILEGED:
             continue  # built from the env itself: nothing to check beforehand
         reasons = []
-        for t, spec in tasks.items():
+        for t, cfg in tasks.items():
             try:
-                resolve_agent(a)(TaskSpec.of(find_task(spec)))
+                resolve_agent(a)(TaskSpec.of(cfg))
             except (WeightsError, ValueError) as e:
                 print(f"skipping {t} x {a}: {e}")
                 skip.add((t, a))
@@ -171,9 +167,10 @@ def main(args: EvalArgs) -> int:
     from cfvs_maniskill.eval.worker import WorkerConfig
     from cfvs_maniskill.objects.spec import HoleSpecError
 
-    objects = resolve(args)
+    configs = find_tasks(args.tasks)
+    objects = resolve(args, configs)
     files = sensor_files(args.sensors)
-    tasks = {n: f for n, f in task_files(args.tasks).items() if n in objects}
+    tasks = {n: c for n, c in configs.items() if n in objects}
     skip = unbuildable(list(args.agents), tasks)
     jobs = make_jobs(
         objects,
@@ -199,7 +196,7 @@ def main(args: EvalArgs) -> int:
         assets=[str(a) for a in args.assets],
         search_radius=args.search_radius,
         sensor_files=files,
-        task_files=tasks,
+        task_files={n: c.source for n, c in tasks.items()},
     )
     t0 = time.perf_counter()
     t_first = None

@@ -20,7 +20,7 @@ class WorkerConfig:
     sensor_files: dict[str, str] = field(default_factory=dict)
     """Sensor profile name -> the file it came from (profiles given as paths)."""
     task_files: dict[str, str] = field(default_factory=dict)
-    """Task name -> the file it came from (tasks given as paths)."""
+    """Task name -> the file it came from (a task given by path, or a bundled one)."""
 
 
 class Worker:

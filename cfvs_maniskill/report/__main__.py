@@ -67,14 +67,11 @@ def main(args: ReportArgs) -> int:
         print(f"error: {args.results}: not a folder of results", file=sys.stderr)
         return 2
     crashed: list[dict] = []
-    from cfvs_maniskill.objects.library import spec_files
-
     try:
-        spec_files(args.assets)
-    except FileNotFoundError as e:
+        records = load_records(args.results, crashed, args.assets)
+    except FileNotFoundError as e:  # an --assets folder that is not there
         print(f"error: --assets: {e}", file=sys.stderr)
         return 2
-    records = load_records(args.results, crashed, args.assets)
     if not records:
         print(
             f"error: {args.results}: no result records (*.jsonl) on known hole objects found "

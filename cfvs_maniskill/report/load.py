@@ -18,10 +18,10 @@ def init_label(rec: dict) -> str:
 
 @functools.cache
 def _dof(task: str, file: str | None) -> int:
-    from cfvs_maniskill.envs.lookup import task_of_record
+    from cfvs_maniskill.envs.lookup import task_named
 
     try:
-        return task_of_record({"task": task, "provenance": {"task": {"file": file}}}).dof
+        return task_named(task, file).dof
     except ValueError:  # a task (file) gone since: the name says it for ours
         digit = task.removeprefix("PegInsert")[:1]
         return int(digit) if digit.isdigit() else 0
@@ -29,8 +29,9 @@ def _dof(task: str, file: str | None) -> int:
 
 def task_dof(rec: dict) -> int:
     """The degrees of freedom of the record's task (its task file's `dof`)."""
-    file = ((rec.get("provenance") or {}).get("task") or {}).get("file")
-    return _dof(rec["task"], file)
+    from cfvs_maniskill.envs.lookup import recorded_file
+
+    return _dof(rec["task"], recorded_file(rec, "task"))
 
 
 def load_records(

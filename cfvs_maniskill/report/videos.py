@@ -88,7 +88,7 @@ def render(
         try:
             if key not in envs:
                 envs[key] = make_env(
-                    task_of_record(rec).source,
+                    task_of_record(rec),
                     rec["agent"],
                     sensor=sensor_of_record(rec),
                     objects=sorted(objects[rec["task"]]),

@@ -8,14 +8,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
-import yaml
 from pydantic import Field
 
 from cfvs_maniskill import resources
 from cfvs_maniskill.errors import FileFieldError
-from cfvs_maniskill.validation import STRICT, validate
+from cfvs_maniskill.validation import STRICT, validate_file
 
 DEFAULT_SENSOR = "ideal"
 DEPTH_MODELS = ("iid", "stereo")
@@ -139,23 +138,12 @@ class SensorProfile:
 _SECTIONS = ("depth", "hand_eye", "wrench", "imager")
 
 
+def _empty_sections_default(data: dict) -> dict:
+    return {k: v for k, v in data.items() if not (k in _SECTIONS and v is None)}
+
+
 def load_profile_file(path: Path) -> SensorProfile:
-    path = Path(path)
-    try:
-        data: Any = yaml.safe_load(path.read_text())
-    except OSError as e:
-        raise SensorProfileError(path, "<file>", f"cannot read: {e.strerror}") from None
-    except yaml.YAMLError as e:
-        raise SensorProfileError(path, "<top>", f"not valid YAML: {e}") from None
-    if not isinstance(data, dict):
-        raise SensorProfileError(path, "<top>", "expected a mapping of profile fields")
-    for reserved in SensorProfile.NOT_IN_FILE:
-        if reserved in data:
-            raise SensorProfileError(path, reserved, "unknown key: the name is the file's")
-    data = {k: v for k, v in data.items() if not (k in _SECTIONS and v is None)}  # defaults
-    profile = validate(
-        SensorProfile, {**data, "name": path.stem, "source": str(path)}, path, SensorProfileError
-    )
+    profile = validate_file(SensorProfile, path, SensorProfileError, _empty_sections_default)
     d = profile.depth
     for k in ("focal_px", "baseline"):
         if d.model == "stereo" and getattr(d, k) <= 0:

@@ -26,9 +26,10 @@ class RunArgs:
     """Task name or env id (bundled, or a file in the user folder's tasks/), e.g.
     PegInsert3DoF or PegInsert6DoF-v1, or a path to a task file (my_task.yaml)."""
     agent: str = "cfvs"
-    """Policy: cfvs (shipped weights), cfvs_no_c2f / cfvs_no_map / cfvs_no_aug / cfvs_aug
-    (the paper's ablations), icp / icp_kpts / 3drhd / kovis (its baselines), oracle (reads
-    the true hole pose)."""
+    """Policy: cfvs (shipped weights), cfvs_no_c2f / cfvs_no_map / cfvs_aug / cfvs_no_rim
+    (the paper's ablations; every CFVS switch has one, see docs/cfvs.md), icp / icp_kpts /
+    3drhd / kovis (its baselines), oracle (reads the true hole pose), cfvs@DIR (your
+    weights), package.module:Class (your agent)."""
     episodes: int = 10
     """Number of episodes."""
     seed: int = 0

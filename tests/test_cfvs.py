@@ -258,7 +258,7 @@ def test_small_offset_is_moved_by_once_then_inserted(make_env, final_correction)
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
     obs, _ = env.reset(seed=3)
-    cfg = CFVSConfig(rim_plane=False, final_correction=final_correction)
+    cfg = CFVSConfig.without("rim_plane", final_correction=final_correction)
     agent = CFVSAgent(TaskSpec.of(env.unwrapped.task), cfg)
     agent.reset(0)
     agent.stage = "fine"
@@ -274,3 +274,47 @@ def test_small_offset_is_moved_by_once_then_inserted(make_env, final_correction)
     assert np.allclose(a.pose, L.apply_action(tcp, small))
     # The next decision inserts without looking again.
     assert agent.act(Observation(obs, a.pose)).kind == "insert" and len(checks) == 1
+
+
+def test_each_ablation_changes_its_component_alone():
+    """An ablation flips its switch and, with it, only the switches that refine it."""
+    from cfvs_maniskill.agents.cfvs import ABLATIONS, REQUIRES, ablation_config
+
+    default = dataclasses.asdict(CFVSConfig())
+    switches = {k for k, v in default.items() if isinstance(v, bool)}
+    assert switches <= {s for s, _ in ABLATIONS.values()}, "a switch without an ablation"
+    for name, (switch, _) in ABLATIONS.items():
+        changed = {
+            k for k, v in dataclasses.asdict(ablation_config(name)).items() if v != default[k]
+        }
+        refining = {switch}
+        while more := {s for s, n in REQUIRES.items() if n in refining} - refining:
+            refining |= more
+        assert switch in changed and changed <= refining, name
+
+
+@pytest.mark.parametrize(
+    ("fields", "named"),
+    [
+        ({"rim_plane": False}, "needs rim_plane=True"),
+        ({"face_height": False}, "face_guard=True needs face_height=True"),
+        ({"coarse_to_fine": False}, "needs coarse_to_fine=True"),
+    ],
+)
+def test_a_switch_without_the_one_it_refines_is_refused(fields, named):
+    with pytest.raises(ValueError, match=named):
+        CFVSConfig(**fields)
+
+
+def test_registry_lists_the_paper_agents_and_makes_every_ablation():
+    from cfvs_maniskill.agents.cfvs import ablation_config
+    from cfvs_maniskill.agents.registry import AGENTS, ablation_names, resolve_agent
+
+    assert len(AGENTS) <= 10
+    from cfvs_maniskill import TASKS
+
+    task = TaskSpec.of(TASKS["PegInsert6DoF"])
+    for name in ablation_names():
+        agent = resolve_agent(name)(task)
+        assert agent.name == name
+        assert agent.cfg == ablation_config(name.removeprefix("cfvs_"))

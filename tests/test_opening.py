@@ -183,7 +183,7 @@ def test_the_face_height_frees_tight_pegs_that_opns_height_left_on_the_rim_or_we
             folder,
             obj,
             seed,
-            {"opn": {"face_height": False}, "face": {}},
+            {"opn": {"face_height": False, "face_guard": False}, "face": {}},
             init_error=init_error,
         )
         assert outcome["face"][0], (obj, stop, outcome)

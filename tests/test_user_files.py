@@ -93,8 +93,8 @@ def test_user_folder_adds_tasks_sensors_holes_and_weights(tmp_path):
     shutil.copy(resources.bundled("sensors") / "iid_3mm.yaml", home / "sensors" / "my_cam.yaml")
     (home / "assets" / "holes").mkdir(parents=True)
     (home / "assets" / "holes" / "my_block.yaml").write_text(BLOCK)
-    shutil.copytree(resources.bundled("agents") / "cfvs" / "oakn_plain",
-                    home / "agents" / "cfvs" / "mine")  # fmt: skip
+    shutil.copytree(resources.bundled("agents") / "cfvs" / "round",
+                    home / "agents" / "cfvs" / "mine" / "round")  # fmt: skip
     probe = """
 import json, cfvs_maniskill, gymnasium as gym
 from cfvs_maniskill.agents.registry import resolve_agent

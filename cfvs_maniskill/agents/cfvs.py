@@ -11,11 +11,10 @@
    and yaw (`opening_fit`, perception/opening.py), OPN's estimate the place to look.
 3. Insert along the tool axis (shared executor, force-bounded).
 
-Ablations of the paper's Table IV are switches: `coarse_to_fine=False` inserts right after
-the coarse move, `confidence_map=False` averages all candidate keypoints uniformly,
-`augmentation=True / False` loads weights trained with / without the paper's augmentation
-(the shipped file if it was trained that way, by its .json; else `*_aug.pt` / `*_noaug.pt`).
-`rim_plane=False` is the paper's own fine stage (OPN's tilt).
+Every component is a CFVSConfig switch; ABLATIONS names the agent that changes one
+(`cfvs_no_c2f`: insert right after the coarse move, `cfvs_no_map`: uniform keypoint mean,
+`cfvs_aug`: nets trained with the paper's augmentation, `cfvs_no_rim`: the paper's fine
+stage, ...); REQUIRES says which switch refines which, checked when a config is built.
 """
 
 from __future__ import annotations
@@ -57,14 +56,13 @@ class CFVSConfig:
     confidence_map: bool = True
     """Weight keypoint candidates by OAKN's confidence (ablation: uniform mean)."""
     augmentation: bool | None = None
-    """None: the shipped weights. True / False (ablation): weights trained with / without
-    the paper's scaling-and-bending augmentation."""
+    """None: the shipped weights (the square nets are trained without the paper's
+    scaling-and-bending augmentation). True / False: the files trained with / without it."""
     max_fine_iterations: int = 8
     """Algorithm 2's repeat limit."""
     tol_translation: float = 0.001
     """e_t: stop servoing when the predicted |dt| is below this, metres (the paper gives
-    no value; 1.5 mm left a lateral p90 of 1.01-1.14 mm under the ideal sensor, 1.0 mm
-    0.94-1.05 mm for 0.1 s more servoing)."""
+    no value; docs/cfvs.md has how 1 mm was chosen)."""
     tol_rotation_deg: float = 1.5
     """e_r: ... and the predicted |dr| below this, degrees."""
     fine_votes: int = 3
@@ -90,8 +88,8 @@ class CFVSConfig:
     step the face may hold under half the ring. False: the least-median plane alone."""
     rim_square_ring: bool = True
     """Square holes: the ring follows the opening's sides (from OPN's yaw), starting 4 mm
-    outside them. False: a round ring beyond the opening's corners, which on a 50 mm hole
-    starts 39 mm out and falls off a small face (a boss, a hub) onto whatever is beyond."""
+    outside them. False: a round ring beyond the opening's corners, which can fall off a
+    small face (a boss, a hub) onto whatever is beyond."""
     rim_narrow_ring: bool = True
     """The rim fit tries a 10 mm ring before the 20 mm one and keeps it when the noise
     measured on it predicts a normal within 0.1 deg (perception/rim.py): beside a step
@@ -104,24 +102,78 @@ class CFVSConfig:
     False: OPN's position and yaw. Round holes keep OPN's."""
     face_height: bool = True
     """6-DoF, with `rim_plane`: put the hole's opening at the level of the face seen just
-    outside it (perception/opening.face_height) instead of OPN's height. OPN's height was
-    measured 3-4 mm above the face beside walls and pockets and 2 cm off on a flange, where
-    the force-guided insertion took a peg wedged in the entry for one deep in the hole.
-    False: OPN's height."""
+    outside it (perception/opening.face_height) instead of OPN's height, which walls and
+    flanges beside the opening pull up. False: OPN's height."""
     face_guard: bool = True
     """6-DoF, with `face_height`: when OPN's new estimate has no face round its opening in
     the cloud (fewer than MIN_LEVEL_POINTS 1-6 mm outside it) after an estimate that had
     one, the fine loop stops and the peg is inserted from where it is, the pose of the last
-    estimate the face supported. Beside a step or a gusset OPN can jump to another surface
-    from one step to the next (a 4 cm step's top: 42 mm above the face, 6 mm aside) and
-    the loop alternated between the two to its limit. False: every estimate is taken
-    (`cfvs_no_face_guard`)."""
+    estimate the face supported: beside a step OPN can jump to another surface and back.
+    False: every estimate is taken."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the
     pre-insertion pose (perception/view.py; the coarse cloud says what stands over the
     face). False: always the nearest."""
     weights_dir: Path = WEIGHTS_DIR
+
+    def __post_init__(self) -> None:
+        for switch, needs in REQUIRES.items():
+            if getattr(self, switch) and not getattr(self, needs):
+                raise ValueError(
+                    f"CFVSConfig: {switch}=True needs {needs}=True (it refines what "
+                    f"{needs} computes); set {switch}=False too, or build it with "
+                    f"CFVSConfig.without('{needs}')"
+                )
+
+    @classmethod
+    def without(cls, switch: str, **fields) -> CFVSConfig:
+        """The default config with `switch` off, and with it every switch that needs it."""
+        off = {switch}
+        while grown := {s for s, n in REQUIRES.items() if n in off} - off:
+            off |= grown
+        return cls(**{s: False for s in off}, **fields)
+
+
+REQUIRES = {
+    "rim_plane": "coarse_to_fine",
+    "final_correction": "coarse_to_fine",
+    "opening_fit": "rim_plane",
+    "face_height": "rim_plane",
+    "face_guard": "face_height",
+    "rim_parallel_planes": "rim_plane",
+    "rim_square_ring": "rim_plane",
+    "rim_narrow_ring": "rim_plane",
+}
+"""Switch -> the switch it refines: a config with the first on and the second off is
+refused, since the first would silently do nothing."""
+
+ABLATIONS: dict[str, tuple[str, str]] = {
+    # The paper's Table IV.
+    "no_c2f": ("coarse_to_fine", "insert right after OAKN's coarse move"),
+    "no_map": ("confidence_map", "keypoints as the uniform mean of the candidates"),
+    "aug": ("augmentation", "networks trained with the paper's augmentation"),
+    # The paper's own fine stage, and one per component of ours (docs/cfvs.md).
+    "no_rim": ("rim_plane", "the hole's axis from OPN, not from the face round the opening"),
+    "opn_height": ("face_height", "the opening's height from OPN, not from the face"),
+    "no_face_guard": ("face_guard", "every fine estimate taken, with or without a face"),
+    "no_opening": ("opening_fit", "a square hole's centre and yaw from OPN alone"),
+    "no_parallel": ("rim_parallel_planes", "the face's plane by least median of squares alone"),
+    "wide_ring": ("rim_narrow_ring", "the rim fit on the 20 mm ring always"),
+    "round_ring": ("rim_square_ring", "a round rim ring beyond a square opening's corners"),
+    "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
+    "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
+}
+"""`cfvs_<name>`: CFVS with one component changed (the switch, then what it says)."""
+
+
+def ablation_config(name: str) -> CFVSConfig:
+    """The config of ablation `name` (a key of ABLATIONS): its switch flipped from the
+    default, with the switches that need it (REQUIRES) off too."""
+    switch, _ = ABLATIONS[name]
+    if switch == "augmentation":  # the shipped nets are trained without it: turn it on
+        return CFVSConfig(augmentation=True)
+    return CFVSConfig.without(switch)
 
 
 def weights_for(

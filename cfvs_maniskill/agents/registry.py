@@ -6,6 +6,7 @@ robot could run); `make_agent` hands the env to nothing else."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 from cfvs_maniskill.agents.base import Agent
 from cfvs_maniskill.agents.interface import TaskSpec
@@ -17,17 +18,17 @@ def _oracle(env) -> Agent:
     return OracleAgent(env)
 
 
-def _cfvs(name: str = "cfvs", weights: str = "", **switches) -> Callable[..., Agent]:
-    """CFVS with config `switches`; `weights`: a weights folder (its tasks.yaml says which
-    files), bundled under agents/cfvs/ or an absolute path, instead of the shipped default."""
+def _cfvs(name: str = "cfvs", weights: str = "", ablation: str = "") -> Callable[..., Agent]:
+    """CFVS, or its `ablation` (a key of cfvs.ABLATIONS); `weights`: a weights folder (its
+    tasks.yaml says which files) instead of the shipped one."""
 
     def make(task: TaskSpec) -> Agent:
-        from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, CFVSConfig
+        from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig, ablation_config
 
-        cfg = dict(switches)
+        cfg = ablation_config(ablation) if ablation else CFVSConfig()
         if weights:
-            cfg["weights_dir"] = WEIGHTS_DIR / weights  # an absolute path stays itself
-        agent = CFVSAgent(task, CFVSConfig(**cfg))
+            cfg.weights_dir = Path(weights)
+        agent = CFVSAgent(task, cfg)
         agent.name = name
         return agent
 
@@ -55,47 +56,14 @@ def _kovis(task: TaskSpec) -> Agent:
     return KOVISAgent(task)
 
 
-EARLIER_FINE_LOOP = {"tol_translation": 0.0015, "vote_gate": 0.0, "final_correction": False}
-"""The fine loop before e_t 1.0 mm, the single-vote steps and the final correction: the
-comparison variants keep it, so their committed records stay what the code does."""
-
-BEFORE_FACE_HEIGHT = {"face_height": False, "face_guard": False}
-"""OPN's height for the opening instead of the face's: the comparison variants keep it, so
-their committed records stay what the code does; `cfvs_opn_height` is the agent they
-compare with (docs/results.md has their history)."""
+PAPER_ABLATIONS = ("no_c2f", "no_map", "aug", "no_rim")
+"""Table IV's ablations (augmentation runs the other way: the shipped nets are trained
+without it), and the paper's own fine stage (OPN's tilt): listed agents. Every other key
+of cfvs.ABLATIONS is an agent too, `cfvs_<key>`, made on request (ablation_names())."""
 
 AGENTS: dict[str, Callable[..., Agent]] = {
     "cfvs": _cfvs(),
-    # The paper's ablations (Table IV).
-    "cfvs_no_c2f": _cfvs("cfvs_no_c2f", coarse_to_fine=False, **BEFORE_FACE_HEIGHT),
-    "cfvs_no_map": _cfvs("cfvs_no_map", confidence_map=False, **BEFORE_FACE_HEIGHT),
-    "cfvs_no_aug": _cfvs("cfvs_no_aug", augmentation=False, **BEFORE_FACE_HEIGHT),
-    # The paper's full model (with its augmentation), as measured: the fine loop of then.
-    "cfvs_aug": _cfvs("cfvs_aug", augmentation=True, rim_plane=False, **EARLIER_FINE_LOOP),
-    # The fine stage as the paper has it: OPN's own tilt, not the face around the opening.
-    "cfvs_no_rim": _cfvs("cfvs_no_rim", rim_plane=False),
-    # The opening's height as OPN gives it, not the face's.
-    "cfvs_opn_height": _cfvs("cfvs_opn_height", **BEFORE_FACE_HEIGHT),
-    # Every fine estimate taken, with or without a face round it.
-    "cfvs_no_face_guard": _cfvs("cfvs_no_face_guard", face_guard=False),
-    # The estimate's position and yaw as OPN gives them, without the opening fit.
-    "cfvs_no_opening": _cfvs("cfvs_no_opening", opening_fit=False, **BEFORE_FACE_HEIGHT),
-    # Always the approach yaw nearest the tool's, whatever stands between the camera and
-    # the opening.
-    "cfvs_fixed_yaw": _cfvs("cfvs_fixed_yaw", clear_view=False, **BEFORE_FACE_HEIGHT),
-    # The rim fit on the 20 mm ring always, never the narrow one first.
-    "cfvs_wide_ring": _cfvs("cfvs_wide_ring", rim_narrow_ring=False, **BEFORE_FACE_HEIGHT),
-    # The face's plane by least median of squares alone, without the parallel-planes check.
-    "cfvs_no_parallel": _cfvs("cfvs_no_parallel", rim_parallel_planes=False, **BEFORE_FACE_HEIGHT),
-    # The networks before the sensor-mixed OPN and the part-trained OAKN (the fine stage
-    # trained on the ideal sensor's clouds only, the coarse one on plain bodies), with the
-    # fine loop's stop of then (e_t 1.5 mm): what training on the sensors' noise and on
-    # part-like bodies buys.
-    "cfvs_ideal_data": _cfvs(
-        "cfvs_ideal_data", weights="ideal_data", rim_plane=False, **EARLIER_FINE_LOOP
-    ),
-    # The coarse network before it was trained on part-like bodies (agents/cfvs/README.md).
-    "cfvs_oakn_plain": _cfvs("cfvs_oakn_plain", weights="oakn_plain", **BEFORE_FACE_HEIGHT),
+    **{f"cfvs_{a}": _cfvs(f"cfvs_{a}", ablation=a) for a in PAPER_ABLATIONS},
     # The paper's baselines (Table II).
     "icp": _icp("workspace"),
     "icp_kpts": _icp("oakn"),
@@ -163,12 +131,22 @@ def _user_factory(name: str, spec: str) -> Callable[..., Agent]:
     return make
 
 
+def ablation_names() -> list[str]:
+    """`cfvs_<ablation>` for every CFVS ablation, listed in AGENTS or not."""
+    from cfvs_maniskill.agents.cfvs import ABLATIONS
+
+    return [f"cfvs_{a}" for a in ABLATIONS]
+
+
 def resolve_agent(name: str) -> Callable[..., Agent]:
-    """The factory for an agent name: a registered one, one an installed package declares
+    """The factory for an agent name: a registered one, a CFVS ablation (`cfvs_<key of
+    cfvs.ABLATIONS>`), one an installed package declares
     (ENTRY_POINT_GROUP), `cfvs@DIR`, or your own class as `package.module:Class` (built with
     the task's TaskSpec); KeyError with a message naming what is wrong."""
     if name in AGENTS:
         return AGENTS[name]
+    if name in ablation_names():
+        return _cfvs(name, ablation=name.removeprefix("cfvs_"))
     installed = installed_agents()
     if name in installed:
         return _user_factory(name, installed[name])
@@ -186,7 +164,8 @@ def resolve_agent(name: str) -> Callable[..., Agent]:
     if ":" in name:
         return _user_factory(name, name)
     raise KeyError(
-        f"unknown agent '{name}'; valid: {', '.join([*AGENTS, *installed])}, "
+        f"unknown agent '{name}'; valid: {', '.join([*AGENTS, *installed])}, the CFVS "
+        f"ablations {', '.join(n for n in ablation_names() if n not in AGENTS)}, "
         f"{WEIGHTS_PREFIX}DIR (CFVS with the weights in DIR) or package.module:Class (your "
         "own Agent subclass)"
     )

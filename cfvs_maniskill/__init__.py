@@ -16,6 +16,6 @@ from cfvs_maniskill import robots  # noqa: E402,F401  (registers the UR5 agents)
 
 __version__ = "0.1.0"
 
-from cfvs_maniskill.envs.peg_insert import register_tasks as _register_tasks  # noqa: E402
+from cfvs_maniskill.envs.registration import register_tasks as _register_tasks  # noqa: E402
 
 TASKS = _register_tasks()

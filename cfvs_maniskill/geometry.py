@@ -53,6 +53,12 @@ def to_pose(T: np.ndarray) -> sapien.Pose:
     return sapien.Pose(p=T[:3, 3].astype(np.float32), q=quaternion(T[:3, :3]))
 
 
+def pose_vector(T: np.ndarray) -> np.ndarray:
+    """(x, y, z, qw, qx, qy, qz): ManiSkill's raw pose layout."""
+    p = to_pose(T)
+    return np.concatenate([p.p, p.q])
+
+
 def make(R: np.ndarray, p: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, p

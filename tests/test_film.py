@@ -8,9 +8,9 @@ import pytest
 
 from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
 from cfvs_maniskill.agents.registry import make_agent
-from cfvs_maniskill.envs.peg_insert import CLOSEUP_PX
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.rendering.film import CAPTION_PX, Film, project
+from cfvs_maniskill.rendering.views import CLOSEUP_PX
 
 
 def _record(r) -> dict:

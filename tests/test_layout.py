@@ -37,7 +37,7 @@ def test_data_and_agents_do_not_import_each_other():
 
 LAYERS = {
     "constants": 0, "errors": 0, "geometry": 0, "task_dof": 0, "validation": 0,
-    "resources": 0, "provenance": 0, "rendering.device": 0, "rendering": 0,
+    "resources": 0, "provenance": 0, "rendering.device": 0, "rendering": 0, "rendering.views": 1,
     "robots": 1, "objects": 1, "sensing": 1,
     "envs": 2, "": 2,
     "perception": 3, "nets": 3,

@@ -49,7 +49,7 @@ def find_task(spec: str | Path) -> TaskConfig:
 def make_args(cfg: TaskConfig) -> tuple[str, dict]:
     """The env id and keywords that `gym.make` builds `cfg`'s env with."""
     from cfvs_maniskill import TASKS
-    from cfvs_maniskill.envs.peg_insert import GENERIC_ID
+    from cfvs_maniskill.envs.registration import GENERIC_ID
 
     if TASKS.get(cfg.name) is cfg:
         return cfg.env_id, {}

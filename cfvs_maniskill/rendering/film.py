@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from cfvs_maniskill.envs.peg_insert import CLOSEUP_CAMERA, CLOSEUP_PX, OVERVIEW_CAMERA
+from cfvs_maniskill.rendering.views import CLOSEUP_CAMERA, CLOSEUP_PX, OVERVIEW_CAMERA
 from cfvs_maniskill.robots.ur5 import CAMERA_UID
 
 CAPTION_PX = 64

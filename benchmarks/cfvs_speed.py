@@ -46,8 +46,8 @@ def measure(args: Args) -> tuple[list[Figure], str]:
     import gymnasium as gym
 
     import cfvs_maniskill  # noqa: F401
-    from cfvs_maniskill.agents.executor import Executor
     from cfvs_maniskill.agents.registry import make_agent
+    from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.episode import run_episode
 
     torch.set_num_threads(args.threads)

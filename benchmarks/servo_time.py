@@ -12,8 +12,8 @@ def measure(episodes: int = 20) -> tuple[list[Figure], str]:
     import gymnasium as gym
     import torch
 
-    from cfvs_maniskill.agents.executor import Executor
     from cfvs_maniskill.agents.registry import make_agent
+    from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.episode import run_episode
 
     torch.set_num_threads(1)

@@ -45,10 +45,10 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
 def diagnose(args: DiagnoseArgs) -> dict:
     import torch
 
-    from cfvs_maniskill.agents.executor import Executor
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.agents.kovis import KOVISAgent
     from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+    from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.nets.checkpoint import file_sha256
     from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
     from cfvs_maniskill.perception import labels as L

@@ -12,9 +12,9 @@ import numpy as np
 
 from cfvs_maniskill import provenance
 from cfvs_maniskill.agents.base import Agent, Observation
-from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import robot_view
 from cfvs_maniskill.constants import INSERT_OVERSHOOT, PRE_INSERT_HEIGHT, SUCCESS_TIP_TOLERANCE
+from cfvs_maniskill.control.executor import Executor
 
 if TYPE_CHECKING:
     from cfvs_maniskill.rendering.film import Film

@@ -59,8 +59,8 @@ class Session:
 def open_session(env, agent: str, search_radius: float = DEFAULT_SEARCH_RADIUS) -> Session:
     """The agent `agent` (a registry name, `cfvs@DIR` or `package.module:Class`) and a
     controller with this compliant-search radius, on `env` (from `make_env`)."""
-    from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
     from cfvs_maniskill.agents.registry import make_agent
+    from cfvs_maniskill.control.executor import Executor, ExecutorConfig
 
     executor = Executor(env, ExecutorConfig(search_radius=search_radius))
     return Session(env, make_agent(agent, env), executor)

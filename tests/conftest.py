@@ -52,8 +52,8 @@ def held_out_outcomes(
     each CFVS agent of `configs` (label -> CFVSConfig keyword arguments): a paired
     comparison on the same env and seed."""
     from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
-    from cfvs_maniskill.agents.executor import Executor
     from cfvs_maniskill.agents.interface import TaskSpec
+    from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.episode import run_episode
 
     assets = str(ROOT / "assets" / folder)

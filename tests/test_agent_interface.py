@@ -12,9 +12,9 @@ import sapien
 import torch
 
 from cfvs_maniskill.agents.base import Agent, Observation
-from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import ALLOWED_OBS, TaskSpec
 from cfvs_maniskill.agents.registry import AGENTS, PRIVILEGED, agent_env_kwargs, make_agent
+from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.envs.task_config import TaskConfig
 from cfvs_maniskill.episode import agent_seed, run_episode
 from cfvs_maniskill.robots.ur5 import STEREO_UIDS

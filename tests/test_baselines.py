@@ -12,12 +12,12 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.agents.base import Action, Observation
-from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.hole_detect import HoleDetectConfig, detect_hole
 from cfvs_maniskill.agents.icp import ICPAgent, ICPConfig
 from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent
 from cfvs_maniskill.constants import hole_half_extent
+from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.envs.peg_insert import PARK
 from cfvs_maniskill.episode import run_episode
 

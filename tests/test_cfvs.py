@@ -12,8 +12,8 @@ import pytest
 import torch
 
 from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, CFVSConfig, weights_for
-from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.interface import TaskSpec
+from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
 from cfvs_maniskill.nets.oakn import weighted_keypoints

@@ -8,9 +8,9 @@ import pytest
 import torch
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.oracle import OracleAgent
 from cfvs_maniskill.constants import hole_half_extent
+from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.rendering import device
 

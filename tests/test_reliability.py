@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from cfvs_maniskill.agents.base import Action, Agent
-from cfvs_maniskill.agents.executor import Executor
 from cfvs_maniskill.agents.oracle import OracleAgent
+from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.episode import run_episode
 
 from .conftest import ROOT, run_cli

@@ -13,8 +13,8 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill import resources
-from cfvs_maniskill.agents.executor import Executor, ExecutorConfig
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+from cfvs_maniskill.control.executor import Executor, ExecutorConfig
 from cfvs_maniskill.robots.ur5 import CAMERA_UID, camera_pose_in_tool
 from cfvs_maniskill.sensing.depth import apply_stereo, discontinuity_jump, edge_mask, grid_points
 from cfvs_maniskill.sensing.floor import (

@@ -1,1 +1,2 @@
-"""Policies ("agents" in this project; the robot is in `robots/`) and the shared executor."""
+"""Policies ("agents" in this project; the robot is in `robots/`, the controller that carries
+out their decisions in `control/`)."""

@@ -20,12 +20,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.force_insert import ForceInsertConfig, force_insert
-from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
 from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
+from cfvs_maniskill.control.force_insert import ForceInsertConfig, force_insert
+from cfvs_maniskill.control.robot import Robot, SimRobot
+from cfvs_maniskill.control.spiral import SpiralSearch, stalled
 
 
 @dataclass
@@ -79,13 +79,12 @@ class ExecutorConfig:
 
 
 class Executor:
-    def __init__(self, env, cfg: ExecutorConfig | None = None):
-        self.env = env.unwrapped
-        self.gym_env = env
+    def __init__(self, robot: Robot | object, cfg: ExecutorConfig | None = None):
+        """`robot`: a Robot, or a PegInsertEnv (or its gym wrapper) to drive as one."""
+        self.robot: Robot = robot if isinstance(robot, Robot) else SimRobot(robot)
         self.cfg = cfg or ExecutorConfig()
-        self.dt = 1.0 / self.env.control_freq
+        self.dt = self.robot.dt
         self.steps = 0
-        self.last_info: dict = {}
         self.last_obs = None
         self.last_target: np.ndarray | None = None
         """The last pose `move_to` commanded (where the arm is converging to)."""
@@ -113,52 +112,41 @@ class Executor:
     def insertion_mode(self) -> str:
         if self.cfg.insertion != "auto":
             return self.cfg.insertion
-        return "force" if self.env.task.clearance < self.cfg.force_below_clearance else "position"
+        return "force" if self.robot.clearance < self.cfg.force_below_clearance else "position"
 
     def step_towards(self, T: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, bool]:
         """One insertion control step: IK for the tcp pose T from joint angles q, then a
         step there with the velocity that gets there in one step. (joint angles, False)
         when T has no IK solution (nothing is stepped)."""
-        q_new, ok = self.env.ik(T, q)
+        q_new, ok = self.robot.ik(T, q)
         if ok:
             self._step(q_new, (q_new - q) / self.dt)
         return q_new, ok
 
     def _step(self, q: np.ndarray, qd: np.ndarray | None = None):
         """One control step towards joint positions q with joint velocities qd (rad/s)."""
-        if self.env.control_mode == "pd_joint_pos_vel":
-            qd = np.zeros_like(q) if qd is None else qd
-            action = torch.as_tensor(np.concatenate([q, qd]), dtype=torch.float32)[None]
-        else:
-            action = torch.as_tensor(q, dtype=torch.float32)[None]
-        self.env.defer_obs = True
-        try:
-            _, _, _, _, self.last_info = self.gym_env.step(action)
-        finally:
-            self.env.defer_obs = False
+        self.robot.command(q, qd)
         self.steps += 1
         if self.on_step is not None:
             self.on_step(self)
-        if not np.all(np.isfinite(self.env.agent.robot.get_qpos().cpu().numpy())):
-            raise FloatingPointError("simulation state became NaN")
 
     def move_to(self, target: np.ndarray) -> MoveResult:
         """Move the tcp to world pose `target` (4x4) along a straight line."""
         if target.shape != (4, 4) or not np.all(np.isfinite(target)):
             return MoveResult(False, "target pose is not a finite 4x4 matrix")
-        start = self.env.tcp_matrix()
+        start = self.robot.tcp()
         dist = np.linalg.norm(target[:3, 3] - start[:3, 3])
         turn = G.rot_angle(start[:3, :3].T @ target[:3, :3])
         n = max(1, int(np.ceil(max(dist / self.cfg.max_speed, turn / self.cfg.max_turn) / self.dt)))
-        q = self.env.agent.robot.get_qpos()[0].cpu().numpy()
-        q_goal, ok = self.env.ik(target, q)
+        q = self.robot.joints()
+        q_goal, ok = self.robot.ik(target, q)
         if not ok:
             return MoveResult(False, "target pose unreachable (no IK solution)")
         path = []
         line = G.interpolator(start, target)
         for i in range(1, n + 1):
             q_prev = q
-            q, ok = self.env.ik(line(i / n), q)
+            q, ok = self.robot.ik(line(i / n), q)
             if not ok:
                 return MoveResult(False, f"path unreachable at {i}/{n} of the way (no IK solution)")
             if np.abs(q - q_prev).max() > self.cfg.max_joint_step:
@@ -167,14 +155,14 @@ class Executor:
             path.append(q)
         steps0 = self.steps
         self.last_target = target.copy()
-        prev = self.env.agent.robot.get_qpos()[0].cpu().numpy()
+        prev = self.robot.joints()
         for q in path:
             self._step(q, (q - prev) / self.dt)
             prev = q
         for _ in range(self.cfg.settle_steps):
             self._step(path[-1])
-        self.last_obs = self.env.get_obs()  # one observation, where the agent looks next
-        got = self.env.tcp_matrix()
+        self.last_obs = self.robot.observe()  # one observation, where the agent looks next
+        got = self.robot.tcp()
         err = np.linalg.norm(got[:3, 3] - target[:3, 3])
         err_rot = np.degrees(G.rot_angle(got[:3, :3].T @ target[:3, :3]))
         if err > self.cfg.reach_tolerance or err_rot > 3.0:
@@ -193,16 +181,16 @@ class Executor:
         when `search_radius` > 0.
         """
         if self.insertion_mode == "force":
-            start = self.env.tcp_matrix() if self.last_target is None else self.last_target
+            start = self.robot.tcp() if self.last_target is None else self.last_target
             steps, outcome = force_insert(self, depth, entry, start, self.cfg.force)
-            q = self.env.agent.robot.get_qpos()[0].cpu().numpy()
+            q = self.robot.joints()
             for _ in range(self.cfg.settle_steps):
                 self._step(q)
             ok = outcome.peg_is_in_place  # the score says where it is
             return MoveResult(ok, "" if ok else outcome.reason, steps + self.cfg.settle_steps)
-        T0 = self.env.tcp_matrix()
+        T0 = self.robot.tcp()
         axis = T0[:3, 2]
-        q = self.env.agent.robot.get_qpos()[0].cpu().numpy()
+        q = self.robot.joints()
         cmd = 0.0
         history = [0.0]
         steps0 = self.steps
@@ -210,7 +198,7 @@ class Executor:
         spiral: SpiralSearch | None = None  # search state once started
         while cmd < depth:
             self.phase = "insertion" if spiral is None else "search: spiral on the rim"
-            done = float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis)
+            done = float((self.robot.tcp()[:3, 3] - T0[:3, 3]) @ axis)
             cmd = min(depth, cmd + self.cfg.insert_speed * self.dt, done + self.cfg.max_lead)
             if spiral is not None:
                 if done > spiral.stalled_at + self.cfg.search_drop:
@@ -225,7 +213,7 @@ class Executor:
             q, ok = self.step_towards(T, q)
             if not ok:
                 return MoveResult(False, "insertion path unreachable", self.steps - steps0)
-            history.append(float((self.env.tcp_matrix()[:3, 3] - T0[:3, 3]) @ axis))
+            history.append(float((self.robot.tcp()[:3, 3] - T0[:3, 3]) @ axis))
             if spiral is None and stalled(history, self.cfg.stall_steps):
                 on_rim = history[-1] < entry + self.cfg.rim_band
                 if on_rim and self.cfg.search_radius > 0 and not np.any(lateral):

@@ -1,34 +1,18 @@
 """Force-guided insertion for tight fits: what a real assembly cell does with a wrist
-force/torque sensor when the hole's play is below the arm's and the camera's accuracy.
+force/torque sensor when the hole's play is below the arm's and the camera's accuracy
+(docs/tight-fits.md has the measurements behind each choice). Every control step:
 
-The position-controlled insertion (`Executor.insert`, the paper's) pushes along the axis
-the arm happens to be on. Below ~2 mm of clearance that fails even with the true hole pose:
-the arm still lags its last move by 1-3 mm / 0.4 deg when the insertion starts (measured:
-the oracle made 2/10 at 0.5 mm). Here instead, every control step:
-
-* the insertion runs along the *commanded* pre-insertion pose, which the arm converges to;
-* admittance: the commanded pose yields to the wrist force/torque sensor's reading
-  (`env.wrist_wrench`, one 6-axis wrench at the flange, moved to the tip with the peg's
-  nominal length) - rotation about the tip by `rot_gain` x moment, lateral by `lat_gain` x
-  force - so the hole's rim and walls turn and centre the peg (a remote-centre-compliance
-  device emulated in software; on the rim this lays the peg's face flat on it);
-* on the rim, a slow spiral search from the centre whose pitch is below what the peg can
-  enter by (its chamfer + half the clearance), so no entry point is skipped; there the
-  commanded pose turns at most 1 deg from the start (enough to lay the face flat), so a
-  peg resting partly over the opening does not tilt towards it while it searches;
-* passing the rim (the tip in the opening, the full section reaching the rim's edge): a
-  tilted peg's low side slides in against the wall while its high side's chamfer rests on
-  the opposite edge. With contact forces split per contact (which no sensor measures) the
-  pose turned *against* the axial load's moment there and straightened such pegs; with
-  the one wrench a wrist sensor gives, yielding to the whole moment in this phase too is
-  what works (measured on the same 160 tight-fit episodes: turning against the whole
-  moment 42/80 at 0.5 mm and 69/80 at 1 mm, yielding to it 68/80 and 77/80). The phase
-  starts 1 mm past the first touch (a peg on the flat rim stops where it touches, the
-  estimated entry height can be 1-2 mm off), the turn stays within 3 deg of the start
-  pose, and a peg that stalls in it goes back to its start orientation and searches as
-  on the rim;
-* in the hole, a stall ends the insertion only after `stall_steps_in_hole` steps without
-  progress: the compliance needs time to free a peg that sticks.
+* the insertion runs along the *commanded* pre-insertion pose, which the arm converges to
+  (pushing along the arm's actual axis leaves its 1-3 mm lag in the hole);
+* admittance: the commanded pose yields to the tared wrist wrench, moved to the tip -
+  rotation about the tip by `rot_gain` x moment, lateral by `lat_gain` x side force - so
+  the rim and walls turn and centre the peg (a remote-centre-compliance device in software);
+* on the rim, a slow spiral from the centre with a pitch below what the peg can enter by,
+  the turn bounded by `max_rim_correction` so a peg partly over the opening stays square;
+* passing the rim, the peg keeps yielding to the whole moment within `max_correction`; a
+  stall there takes it back to its start orientation to search as on the rim;
+* in the hole, a stall ends the insertion only after `stall_steps_in_hole` steps: the
+  compliance needs time to free a peg that sticks.
 """
 
 from __future__ import annotations
@@ -40,8 +24,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.interface import flange_pose
-from cfvs_maniskill.agents.spiral import SpiralSearch, stalled
+from cfvs_maniskill.control.spiral import SpiralSearch, stalled
+from cfvs_maniskill.robots.poses import flange_pose
 
 
 @dataclass
@@ -72,23 +56,16 @@ class ForceInsertConfig:
     passing_from: float = 0.001
     """Travel past the first touch (m) from which the tip counts as in the opening (the
     rim-passing phase): a peg on the flat rim stops where it touches, one in the chamfer
-    moves on. A peg that drops off the spiral enters that phase too. (Counted from the
-    estimated entry instead, a 1-2 mm error in the hole's height sent pegs on the rim into
-    it: measured, 1 mm success 0.915 / 0.900 -> 0.880 / 0.845.)"""
+    moves on; counted from the touch, not the estimated entry, whose height can be 1-2 mm
+    off. A peg that drops off the spiral enters that phase too."""
     max_correction: float = np.radians(3.0)
     """Largest turn of the commanded pose away from the start pose once passing the rim or
-    in the hole, rad (set when the fine stage left 2.2 deg of tilt at p90; a peg still on
-    the rim but taken to be passing it turns towards its load without end otherwise:
-    measured, 10-45 deg tilts)."""
+    in the hole, rad: above the fine stage's tilt error, and a bound for a peg still on the
+    rim but taken to be passing it, which would turn towards its load without end."""
     max_rim_correction: float = np.radians(1.0)
-    """The same bound while the tip is on the rim (and searching there), rad. Enough to lay
-    the face flat on it (the fine stage leaves 0.27 / 0.57 deg of tilt at p90, ideal /
-    realistic); more let a peg resting partly over the opening tilt towards it while the
-    spiral dragged it about, and it reached the opening 3.6 deg askew and jammed 3 mm in
-    (most 0.5 mm failures under `realistic`, where the hand-eye error leaves 2 mm to
-    search). It counts the whole turn, yaw included, so a peg arriving over 1 deg off in
-    yaw cannot square itself on the rim (traced with OPN's yaw, `cfvs_no_opening`);
-    bounding the tilt alone is the next change (docs/tight-fits.md)."""
+    """The same bound while the tip is on the rim (and searching there), rad: enough to lay
+    the face flat on it, little enough that a peg resting partly over the opening does not
+    tilt towards it while the spiral drags it. It bounds the whole turn, yaw included."""
     contact_force: float = 1.0
     """A tared reading above this (N) is the first touch (well above the sensor noise of
     the shipped profiles: 0.1 N per axis)."""
@@ -167,13 +144,6 @@ def spiral_pitch(search_pitch: float, clearance: float, chamfer: float) -> float
     return min(search_pitch, chamfer + clearance / 2)
 
 
-def admittance_moment(phase: Phase, moment: np.ndarray) -> np.ndarray:
-    """The moment (world, about the tip) the commanded pose turns along with: all of the
-    measured one, in every phase (see the module doc for why not against it while passing
-    the rim). `phase` is kept for the stall windows and the turn limit, which differ."""
-    return moment
-
-
 def tip_wrench(wrench: np.ndarray, flange: np.ndarray, tip: np.ndarray):
     """A flange-frame wrist wrench (fx fy fz tx ty tz, about the flange) -> the world-frame
     force and its moment about the peg tip."""
@@ -199,34 +169,32 @@ def force_insert(
     """Insert `depth` m along the commanded tcp pose `start` (4x4, world) with admittance.
 
     Returns (control steps taken, how it ended)."""
-    env, cfg = executor.env, executor.cfg
-    task = env.task
-    pitch = spiral_pitch(cfg.search_pitch, task.clearance, task.peg_chamfer)
-    entry_zone = (entry - fcfg.entry_margin, entry + task.peg_chamfer + fcfg.entry_margin)
+    robot, cfg = executor.robot, executor.cfg
+    pitch = spiral_pitch(cfg.search_pitch, robot.clearance, robot.chamfer)
+    entry_zone = (entry - fcfg.entry_margin, entry + robot.chamfer + fcfg.entry_margin)
     C = start.copy()
     origin = start[:3, 3].copy()
     centre = origin.copy()  # the insertion line's point at zero depth (moves with admittance)
-    q = env.agent.robot.get_qpos()[0].cpu().numpy()
+    q = robot.joints()
     cmd, history, steps0 = 0.0, [0.0], executor.steps
     spiral: SpiralSearch | None = None
     lateral = np.zeros(3)
     phase = Phase.RIM
     searched = False
     contact_at: float | None = None  # travel at the first touch
-    # Tare: the peg is clear of the part here, so this reading is the sensor's offset.
-    tare = env.wrist_wrench()
+    robot.tare()  # the peg is clear of the part here: this reading is the sensor's offset
     while cmd < depth:
         executor.phase = (
             f"insertion (force): {phase.value}" if spiral is None else "search: spiral on the rim"
         )
         if executor.steps - steps0 >= fcfg.max_steps:
             return executor.steps - steps0, Outcome.TIMED_OUT
-        tcp = env.tcp_matrix()  # forward kinematics
+        tcp = robot.tcp()  # forward kinematics
         flange = flange_pose(tcp)  # the peg's nominal length back along the axis
-        force, moment = tip_wrench(env.wrist_wrench() - tare, flange, tcp[:3, 3])
+        force, moment = tip_wrench(robot.wrench(), flange, tcp[:3, 3])
         if contact_at is None and np.linalg.norm(force) > fcfg.contact_force:
             contact_at = history[-1]
-        w = fcfg.rot_gain * admittance_moment(phase, moment)
+        w = fcfg.rot_gain * moment  # yield to the whole moment, in every phase
         n = np.linalg.norm(w)
         if n > fcfg.max_rot_step:
             w *= fcfg.max_rot_step / n
@@ -235,7 +203,7 @@ def force_insert(
         if G.rot_angle(start[:3, :3].T @ R) <= bound:
             centre = _turn_about_tip(C, centre, cmd, R)
         z = C[:3, 2]
-        done = float((env.tcp_matrix()[:3, 3] - origin) @ z)
+        done = float((robot.tcp()[:3, 3] - origin) @ z)
         side = force - (force @ z) * z
         if spiral is None:
             d = fcfg.lat_gain * side
@@ -255,9 +223,9 @@ def force_insert(
         q, ok = executor.step_towards(T, q)
         if not ok:
             return executor.steps - steps0, Outcome.UNREACHABLE
-        now = float((env.tcp_matrix()[:3, 3] - origin) @ z)
+        now = float((robot.tcp()[:3, 3] - origin) @ z)
         history.append(now)
-        phase = next_phase(phase, now, entry, task.peg_chamfer, contact_at, searched, fcfg)
+        phase = next_phase(phase, now, entry, robot.chamfer, contact_at, searched, fcfg)
         k = stall_window(phase, now, entry_zone, fcfg, cfg)
         if spiral is None and stalled(history, k):
             if phase is not Phase.HOLE and cfg.search_radius > 0 and not searched:
@@ -265,7 +233,7 @@ def force_insert(
                 # chamfer and wedged there. Back to the start orientation (the travel is
                 # measured along the new axis), lay the face on the rim and search.
                 centre = _turn_about_tip(C, centre, cmd, start[:3, :3])
-                now = float((env.tcp_matrix()[:3, 3] - origin) @ C[:3, 2])
+                now = float((robot.tcp()[:3, 3] - origin) @ C[:3, 2])
                 phase = Phase.RIM
                 spiral = SpiralSearch(
                     pitch, fcfg.search_speed, cfg.search_radius, now, min_radius=pitch / 4

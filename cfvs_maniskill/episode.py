@@ -40,6 +40,8 @@ class EpisodeResult:
     provenance: dict = field(default_factory=dict)
     """Which code, weights, sensor profile, task and object files made it (provenance.py)."""
     move_residuals: list = field(default_factory=list)
+    planned_moves: int = 0
+    """Moves that followed a planned collision-free path instead of the straight line."""
     """After each of the agent's moves, the true error from the pre-insertion pose:
     [lateral mm, tilt deg] (measured by the runner from true poses; agents never see it)."""
 
@@ -111,7 +113,7 @@ def run_episode(
     u = env.unwrapped
     obs, _ = env.reset(seed=seed, options=options or {})
     agent.reset(agent_seed(seed))
-    executor.reset()
+    executor.reset(obs)
     executor.on_step = None if film is None else film.on_step
     if film is not None:
         film.start()
@@ -162,6 +164,7 @@ def run_episode(
         success=success,
         servo_time_s=round(executor.servo_time, 3),
         steps=executor.steps,
+        planned_moves=executor.planned_moves,
         reason="" if success else reason,
         tilt_deg=round(u.episode_info["tilt_deg"], 2),
         tip_to_bottom_m=round(clean["tip_to_bottom"], 5),

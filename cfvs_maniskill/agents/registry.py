@@ -71,7 +71,7 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "kovis": _kovis,
     "oracle": _oracle,
 }
-AGENT_ENV = {"oracle": {"obs_mode": "state"}, "kovis": {"obs_mode": "rgbd", "stereo": True}}
+AGENT_ENV = {"oracle": {"obs_mode": "pointcloud"}, "kovis": {"obs_mode": "rgbd", "stereo": True}}
 """The env options (gym.make keywords) a built-in agent needs; agents not listed here see
 the wrist point cloud (`{"obs_mode": "pointcloud"}`)."""
 DEFAULT_AGENT = "cfvs"

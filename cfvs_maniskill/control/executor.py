@@ -24,6 +24,7 @@ import numpy as np
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
 from cfvs_maniskill.control.force_insert import ForceInsertConfig, force_insert
+from cfvs_maniskill.control.planner import PathPlanner, PlannerConfig
 from cfvs_maniskill.control.robot import Robot, SimRobot
 from cfvs_maniskill.control.spiral import SpiralSearch, stalled
 
@@ -76,6 +77,13 @@ class ExecutorConfig:
     """auto picks the force-guided insertion for holes with less clearance than this, m
     (the paper's 4 mm tasks keep the insertion their results were measured with)."""
     force: ForceInsertConfig = field(default_factory=ForceInsertConfig)
+    plan: bool = True
+    """Plan a collision-free joint path (control/planner.py) when a move's straight line
+    would touch what the camera has seen or the table, or cannot be followed. False: the
+    paper's straight lines only."""
+    joint_speed: float = 1.0
+    """Joint speed along planned paths, rad/s (a third of the UR5's wrist limit)."""
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
 
 
 class Executor:
@@ -85,6 +93,13 @@ class Executor:
         self.cfg = cfg or ExecutorConfig()
         self.dt = self.robot.dt
         self.steps = 0
+        self.planned_moves = 0
+        """Moves this episode that followed a planned path instead of the straight line."""
+        self.planner = None
+        if self.cfg.plan:
+            self.planner = PathPlanner(
+                self.robot.collision, self.robot.ik, self.robot.joint_limits, self.cfg.planner
+            )
         self.last_obs = None
         self.last_target: np.ndarray | None = None
         """The last pose `move_to` commanded (where the arm is converging to)."""
@@ -103,10 +118,16 @@ class Executor:
         """Simulated seconds spent moving since the last `reset`."""
         return self.steps * self.dt
 
-    def reset(self) -> None:
+    def reset(self, obs=None) -> None:
+        """A new episode; `obs`: its first observation (what the camera sees at the start)."""
         self.steps = 0
+        self.planned_moves = 0
         self.last_target = None
         self.phase = ""
+        if self.planner is not None:
+            self.planner.world.clear()
+            if obs is not None:
+                self.planner.world.add_observation(obs, self.robot.tcp(), self.robot.peg)
 
     @property
     def insertion_mode(self) -> str:
@@ -131,37 +152,29 @@ class Executor:
             self.on_step(self)
 
     def move_to(self, target: np.ndarray) -> MoveResult:
-        """Move the tcp to world pose `target` (4x4) along a straight line."""
+        """Move the tcp to world pose `target` (4x4): along a straight line, or along a
+        planned collision-free joint path when the line would touch what the camera has
+        seen (or the table) or cannot be followed."""
         if target.shape != (4, 4) or not np.all(np.isfinite(target)):
             return MoveResult(False, "target pose is not a finite 4x4 matrix")
-        start = self.robot.tcp()
-        dist = np.linalg.norm(target[:3, 3] - start[:3, 3])
-        turn = G.rot_angle(start[:3, :3].T @ target[:3, :3])
-        n = max(1, int(np.ceil(max(dist / self.cfg.max_speed, turn / self.cfg.max_turn) / self.dt)))
-        q = self.robot.joints()
-        q_goal, ok = self.robot.ik(target, q)
-        if not ok:
-            return MoveResult(False, "target pose unreachable (no IK solution)")
-        path = []
-        line = G.interpolator(start, target)
-        for i in range(1, n + 1):
-            q_prev = q
-            q, ok = self.robot.ik(line(i / n), q)
-            if not ok:
-                return MoveResult(False, f"path unreachable at {i}/{n} of the way (no IK solution)")
-            if np.abs(q - q_prev).max() > self.cfg.max_joint_step:
-                # IK jumped to another arm configuration: the straight line is not followable.
-                return MoveResult(False, f"path needs an arm configuration flip at {i}/{n}")
-            path.append(q)
+        q0 = self.robot.joints()
+        path, reason = self._straight_path(target, q0)
+        if self.planner is not None and (path is None or not self.planner.path_free([q0, *path])):
+            planned = self.planner.plan(q0, target)
+            if planned is not None:
+                path = self._timed(planned)
+                self.planned_moves += 1
+        if path is None:
+            return MoveResult(False, reason)
         steps0 = self.steps
         self.last_target = target.copy()
-        prev = self.robot.joints()
+        prev = q0
         for q in path:
             self._step(q, (q - prev) / self.dt)
             prev = q
         for _ in range(self.cfg.settle_steps):
             self._step(path[-1])
-        self.last_obs = self.robot.observe()  # one observation, where the agent looks next
+        self._look()  # one observation, where the agent looks next
         got = self.robot.tcp()
         err = np.linalg.norm(got[:3, 3] - target[:3, 3])
         err_rot = np.degrees(G.rot_angle(got[:3, :3].T @ target[:3, :3]))
@@ -172,6 +185,44 @@ class Executor:
                 self.steps - steps0,
             )
         return MoveResult(True, "", self.steps - steps0)
+
+    def _straight_path(self, target: np.ndarray, q: np.ndarray) -> tuple[list | None, str]:
+        """Joint waypoints of the straight Cartesian line to `target` at the speed limits
+        (one per control step), or None and why it cannot be followed."""
+        start = self.robot.tcp()
+        dist = np.linalg.norm(target[:3, 3] - start[:3, 3])
+        turn = G.rot_angle(start[:3, :3].T @ target[:3, :3])
+        n = max(1, int(np.ceil(max(dist / self.cfg.max_speed, turn / self.cfg.max_turn) / self.dt)))
+        _, ok = self.robot.ik(target, q)
+        if not ok:
+            return None, "target pose unreachable (no IK solution)"
+        path = []
+        line = G.interpolator(start, target)
+        for i in range(1, n + 1):
+            q_prev = q
+            q, ok = self.robot.ik(line(i / n), q)
+            if not ok:
+                return None, f"path unreachable at {i}/{n} of the way (no IK solution)"
+            if np.abs(q - q_prev).max() > self.cfg.max_joint_step:
+                # IK jumped to another arm configuration: the straight line is not followable.
+                return None, f"path needs an arm configuration flip at {i}/{n}"
+            path.append(q)
+        return path, ""
+
+    def _timed(self, path: list[np.ndarray]) -> list[np.ndarray]:
+        """A planned path's joint waypoints, one per control step at `joint_speed`."""
+        out = []
+        step = self.cfg.joint_speed * self.dt
+        for a, b in zip(path[:-1], path[1:], strict=True):
+            n = max(1, int(np.ceil(np.abs(b - a).max() / step)))
+            out += [a + (b - a) * i / n for i in range(1, n + 1)]
+        return out
+
+    def _look(self) -> None:
+        """Observe, and add what the camera saw to the planner's known world."""
+        self.last_obs = self.robot.observe()
+        if self.planner is not None:
+            self.planner.world.add_observation(self.last_obs, self.robot.tcp(), self.robot.peg)
 
     def insert(self, depth: float, entry: float = 0.0) -> MoveResult:
         """Push the peg `depth` metres along its own axis (its +z), with bounded force.

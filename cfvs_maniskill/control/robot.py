@@ -9,6 +9,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 import torch
 
+from cfvs_maniskill.robots.collision import ArmCollision
+
 
 @runtime_checkable
 class Robot(Protocol):
@@ -18,6 +20,11 @@ class Robot(Protocol):
     """The task's nominal hole clearance, m (the insertion chooses its mode by it)."""
     chamfer: float
     """The peg's chamfer, m."""
+    peg: str
+    """The peg's profile (round, square): the camera sees it, the known world leaves it out."""
+    joint_limits: tuple[np.ndarray, np.ndarray]
+    collision: ArmCollision
+    """The arm's and peg's collision hulls (from its URDF), posed by forward kinematics."""
 
     def tcp(self) -> np.ndarray:
         """The tool (peg tip) pose, world, from the joints (forward kinematics)."""
@@ -52,6 +59,9 @@ class SimRobot:
         self.dt = 1.0 / self.env.control_freq
         self.clearance = self.env.task.clearance
         self.chamfer = self.env.task.peg_chamfer
+        self.peg = self.env.task.peg
+        self.joint_limits = self.env.kinematics.qlimits
+        self.collision = self.env.collision
         self.last_info: dict = {}
         self._zero = np.zeros(6)
 

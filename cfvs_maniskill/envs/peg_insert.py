@@ -10,6 +10,7 @@ import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils.structs.types import SceneConfig, SimConfig
+from scipy.spatial import cKDTree
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import (
@@ -23,9 +24,17 @@ from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.rendering import device
 from cfvs_maniskill.rendering.views import aim_at_hole, human_camera_configs
+from cfvs_maniskill.robots.collision import ArmCollision, surface_points
 from cfvs_maniskill.robots.kinematics import ArmKinematics, body_pose
 from cfvs_maniskill.robots.poses import flange_pose, insertion_pose
-from cfvs_maniskill.robots.ur5 import CAMERA_FOV, STEREO_UIDS, TCP_LINK, TOOL_LINK, robot_uid_for
+from cfvs_maniskill.robots.ur5 import (
+    CAMERA_FOV,
+    STEREO_UIDS,
+    TCP_LINK,
+    TOOL_LINK,
+    robot_uid_for,
+    start_seeds,
+)
 from cfvs_maniskill.sensing.model import SensorModel
 from cfvs_maniskill.sensing.profile import load_profile
 from cfvs_maniskill.sensing.wrench import contact_wrench
@@ -205,6 +214,8 @@ class PegInsertEnv(BaseEnv):
             b.initial_pose = sapien.Pose(p=PARK + [0, i, 0])
             self.hole_objects.append(b.build_kinematic(name=f"hole_{spec.name}"))
         self.kinematics = ArmKinematics(self.agent.robot, TCP_LINK)
+        self.collision = ArmCollision(self.agent.robot, self.kinematics)
+        self._surfaces = [surface_points(g) for g in self.geometries]
 
     # ------------------------------------------------------------------ kinematics
     def tcp_matrix(self) -> np.ndarray:
@@ -270,14 +281,11 @@ class PegInsertEnv(BaseEnv):
         else:
             idx = int(rng.integers(len(self.object_names)))
         geom = self.geometries[idx]
-        home = np.asarray(self.agent.keyframes["home"].qpos)
         for _ in range(MAX_INIT_TRIES):
             T_obj, H = sample_object_pose(rng, cfg, geom)
             T_start = sample_start(rng, cfg, H, self.init_error_m)
-            q0, ok0 = self.ik(T_start, home)
-            q1, ok1 = self.ik(self.insertion_pose(-PRE_INSERT_HEIGHT, H, T_start), q0)
-            _, ok2 = self.ik(self.insertion_pose(cfg.hole_depth - 0.002, H, T_start), q1)
-            if ok0 and ok1 and ok2:
+            q0 = self._solvable_start(T_obj, H, T_start, self._surfaces[idx])
+            if q0 is not None:
                 break
         else:
             raise RuntimeError(f"no reachable scene in {MAX_INIT_TRIES} tries for {geom.name}")
@@ -290,6 +298,27 @@ class PegInsertEnv(BaseEnv):
         qt = torch.as_tensor(q0, dtype=torch.float32)[None]
         self.agent.reset(qt)
         self.episode_info = self._describe_episode()
+
+    def _solvable_start(self, T_obj, H, T_start, surface) -> np.ndarray | None:
+        """Joints for the start pose from which the pre-insertion and the inserted pose are
+        reachable along one IK branch, with the arm clear of the table and the object at
+        all three (the peg itself may be in the hole at the last); None if no branch is."""
+        cfg = self.task
+        obstacle = surface @ T_obj[:3, :3].T + T_obj[:3, 3]
+        tree = cKDTree(obstacle)
+        for seed in start_seeds(T_start):
+            q0, ok0 = self.ik(T_start, seed)
+            q1, ok1 = self.ik(self.insertion_pose(-PRE_INSERT_HEIGHT, H, T_start), q0)
+            q2, ok2 = self.ik(self.insertion_pose(cfg.hole_depth - 0.002, H, T_start), q1)
+            if not (ok0 and ok1 and ok2):
+                continue
+            clear = all(
+                self.collision.touches(q, obstacle, tree, 0.0, skip=skip) is None
+                for q, skip in ((q0, ()), (q1, ()), (q2, ("peg",)))
+            )
+            if clear:
+                return q0
+        return None
 
     def _describe_episode(self) -> dict[str, Any]:
         H = self.hole_pose

@@ -39,6 +39,11 @@ class ArmKinematics:
             ok = self._reaches(q, T)
         return np.asarray(q), bool(ok)
 
+    def link_poses(self, q: np.ndarray, links: list[int]) -> list[np.ndarray]:
+        """World poses (4x4) of the links with these articulation indices at joints q."""
+        self._pin.compute_forward_kinematics(np.asarray(q, np.float64))
+        return [G.to_matrix(self._pin.get_link_pose(i)) for i in links]
+
     def _reaches(self, q: np.ndarray, T: np.ndarray) -> bool:
         """Whether joint positions q put the tcp within 1 mm and 0.01 rad of T."""
         self._pin.compute_forward_kinematics(q)

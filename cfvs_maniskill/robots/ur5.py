@@ -58,6 +58,16 @@ STIFFNESS = 2000.0
 DAMPING = 200.0
 
 HOME_QPOS = np.array([0.0, -1.9, 1.9, -1.571, -1.571, 0.0])
+
+
+def start_seeds(T: np.ndarray) -> list[np.ndarray]:
+    """IK starts for a tcp pose T, in order: the home pose, then home turned to face T
+    with the elbow up (the first can converge to an elbow-down branch whose upper arm
+    dips into the table)."""
+    pan = np.arctan2(T[1, 3], T[0, 3])
+    return [HOME_QPOS, HOME_QPOS + [pan, 0, 0, 0, 0, 0], HOME_QPOS + [pan, 0.4, -0.4, 0, 0, 0]]
+
+
 """Peg pointing straight down about 0.35 m above the table, 0.45 m in front of the base."""
 
 TCP_LINK = "tcp"

@@ -1,0 +1,168 @@
+"""Collision-free joint paths against what the robot knows: the table's plane and the
+occupancy of every wrist cloud seen this episode (voxels), with the IK branch chosen for a
+free path. The executor asks for one only when its straight Cartesian line would touch a
+known obstacle or is not followable, so moves in free space stay straight lines.
+
+The search is RRT-Connect (Kuffner & LaValle 2000) with shortcutting, in numpy with a
+generator seeded by the query itself: ManiSkill's planner (mplib 0.1.1) crashes under
+numpy 2, and OMPL's Python bindings draw from one process-wide seed, so an episode's path
+would depend on what the worker ran before it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from cfvs_maniskill.perception.clouds import object_points, tool_to_world
+from cfvs_maniskill.robots.collision import ArmCollision
+
+
+@dataclass
+class PlannerConfig:
+    margin: float = 0.01
+    """Clearance kept from known points and the table, m (a voxel's half diagonal less)."""
+    voxel: float = 0.01
+    """Occupancy resolution, m."""
+    extend: float = 0.15
+    """Longest RRT extension, rad (joint-space distance)."""
+    check_step: float = 0.02
+    """Joint-space spacing at which an edge is checked, rad (2 cm at the peg's tip)."""
+    max_samples: int = 3000
+    """Random configurations tried before the search gives up."""
+    goal_seeds: int = 12
+    """IK starts for the goal: the current joints, then random ones (other arm branches)."""
+    shortcuts: int = 80
+    """Random shortcut attempts on a found path."""
+
+
+class KnownWorld:
+    """Occupied voxels from the wrist clouds of this episode (world frame), without the
+    table (a known plane) and the peg; what the planner avoids."""
+
+    def __init__(self, voxel: float):
+        self.voxel = voxel
+        self._keys: set[tuple[int, int, int]] = set()
+        self.points = np.zeros((0, 3))
+        self.tree: cKDTree | None = None
+
+    def clear(self) -> None:
+        self._keys.clear()
+        self.points, self.tree = np.zeros((0, 3)), None
+
+    def add_observation(self, obs, tcp: np.ndarray, peg: str) -> None:
+        """Add what a pointcloud observation saw (other observation modes add nothing)."""
+        cloud = obs.get("pointcloud") if isinstance(obs, dict) else None
+        if cloud is None or "xyzw" not in cloud:
+            return
+        xyzw = cloud["xyzw"][0].cpu().numpy()
+        world = tool_to_world(object_points(xyzw, tcp, peg), tcp)
+        keys = {tuple(k) for k in np.floor(world / self.voxel).astype(np.int64)}
+        if keys <= self._keys:
+            return
+        self._keys |= keys
+        self.points = (np.array(sorted(self._keys), np.float64) + 0.5) * self.voxel
+        self.tree = cKDTree(self.points)
+
+
+class PathPlanner:
+    def __init__(self, collision: ArmCollision, ik, limits, cfg: PlannerConfig | None = None):
+        """`ik(T, seed) -> (q, ok)`: the robot's IK; `limits`: (low, high) joint arrays."""
+        self.collision = collision
+        self.ik = ik
+        self.low, self.high = (np.asarray(a, np.float64) for a in limits)
+        self.cfg = cfg or PlannerConfig()
+        self.world = KnownWorld(self.cfg.voxel)
+
+    def blocked_by(self, q: np.ndarray) -> str | None:
+        """The link of configuration q that would touch a known obstacle, or None."""
+        w = self.world
+        return self.collision.touches(q, w.points, w.tree, self.cfg.margin)
+
+    def edge_free(self, a: np.ndarray, b: np.ndarray) -> bool:
+        n = max(1, int(np.ceil(np.abs(b - a).max() / self.cfg.check_step)))
+        return all(self.blocked_by(a + (b - a) * i / n) is None for i in range(1, n + 1))
+
+    def path_free(self, path: list[np.ndarray]) -> bool:
+        return all(self.edge_free(a, b) for a, b in zip(path[:-1], path[1:], strict=True))
+
+    def plan(self, q0: np.ndarray, target: np.ndarray) -> list[np.ndarray] | None:
+        """A collision-free joint path from q0 to a configuration putting the tcp at
+        `target` (4x4), or None (the start or every goal configuration is blocked, or no
+        path was found)."""
+        seed = hashlib.sha256(np.concatenate([q0, target.ravel()]).tobytes()).digest()
+        rng = np.random.default_rng(int.from_bytes(seed[:8], "little"))
+        if self.blocked_by(q0) is not None:
+            return None
+        goals = []
+        for k in range(self.cfg.goal_seeds):
+            start = q0 if k == 0 else rng.uniform(self.low, self.high)
+            q, ok = self.ik(target, start)
+            if ok and self.blocked_by(q) is None:
+                goals.append(q)
+        for goal in sorted(goals, key=lambda g: float(np.abs(g - q0).sum())):
+            path = self._connect(q0, goal, rng)
+            if path is not None:
+                return self._shortcut(path, rng)
+        return None
+
+    def _connect(self, q0: np.ndarray, goal: np.ndarray, rng) -> list[np.ndarray] | None:
+        if self.edge_free(q0, goal):
+            return [q0, goal]
+        trees = ([q0], [None]), ([goal], [None])  # (nodes, parent index) from each end
+        for _ in range(self.cfg.max_samples):
+            sample = rng.uniform(self.low, self.high)
+            grow, other = trees
+            i = self._extend(grow, sample)
+            if i is not None:
+                j = self._reach(other, grow[0][i])
+                if j is not None:
+                    a, b = self._branch(grow, i), self._branch(other, j)
+                    path = a[::-1] + b
+                    return path if grow is trees[0] else path[::-1]
+            trees = trees[1], trees[0]
+        return None
+
+    def _extend(self, tree, sample: np.ndarray) -> int | None:
+        """One step from the tree's nearest node towards `sample`; the new node or None."""
+        nodes, parents = tree
+        near = int(np.argmin([np.abs(n - sample).max() for n in nodes]))
+        d = sample - nodes[near]
+        step = np.abs(d).max()
+        new = nodes[near] + d * min(1.0, self.cfg.extend / max(step, 1e-12))
+        if not self.edge_free(nodes[near], new):
+            return None
+        nodes.append(new)
+        parents.append(near)
+        return len(nodes) - 1
+
+    def _reach(self, tree, target: np.ndarray) -> int | None:
+        """Extend the tree towards `target` until it gets there (its index) or is blocked."""
+        while True:
+            i = self._extend(tree, target)
+            if i is None:
+                return None
+            if np.abs(tree[0][i] - target).max() < 1e-9:
+                return i
+
+    @staticmethod
+    def _branch(tree, i: int) -> list[np.ndarray]:
+        """Nodes from node i back to the tree's root."""
+        nodes, parents = tree
+        out = []
+        while i is not None:
+            out.append(nodes[i])
+            i = parents[i]
+        return out
+
+    def _shortcut(self, path: list[np.ndarray], rng) -> list[np.ndarray]:
+        for _ in range(self.cfg.shortcuts):
+            if len(path) < 3:
+                break
+            i, j = sorted(rng.choice(len(path), 2, replace=False))
+            if j - i > 1 and self.edge_free(path[i], path[j]):
+                path = path[: i + 1] + path[j:]
+        return path

@@ -1,0 +1,97 @@
+"""The arm's own collision model: the convex hull of every link (and the peg) in its link's
+frame, posed by forward kinematics, to tell whether a joint configuration would touch a
+known obstacle (points seen by the camera, the table's plane). A robot's controller knows
+this much from its URDF; nothing here reads the simulated world."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from scipy.spatial import ConvexHull, cKDTree
+
+from cfvs_maniskill import geometry as G
+
+
+@dataclass
+class LinkHull:
+    index: int
+    """The link's index in the articulation (and in Pinocchio's link order)."""
+    name: str
+    faces: np.ndarray
+    """(F, 4) outward face planes in the link frame: n . p + d <= 0 inside."""
+    vertices: np.ndarray
+    """(V, 3) hull vertices in the link frame."""
+    centre: np.ndarray
+    radius: float
+    """The hull's bounding sphere in the link frame."""
+
+
+def _shape_vertices(shape) -> np.ndarray:
+    """A PhysX collision shape's vertices in its link's frame (convex meshes and boxes)."""
+    if hasattr(shape, "half_size"):
+        h = np.asarray(shape.half_size, np.float64)
+        v = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * h
+    else:
+        v = np.asarray(shape.vertices, np.float64) * np.asarray(shape.scale, np.float64)
+    return v @ G.to_matrix(shape.local_pose)[:3, :3].T + G.to_matrix(shape.local_pose)[:3, 3]
+
+
+class ArmCollision:
+    def __init__(self, robot, kinematics, on_table: tuple[str, ...] = ("base_link",)):
+        """`robot`: a ManiSkill Articulation; `kinematics`: its ArmKinematics; links whose
+        name ends in one of `on_table` stand on the table and are not checked against it."""
+        self.kinematics = kinematics
+        self.hulls: list[LinkHull] = []
+        self.on_table = set()
+        for i, link in enumerate(robot._objs[0].get_links()):
+            shapes = link.get_collision_shapes()
+            if not shapes:
+                continue
+            v = np.concatenate([_shape_vertices(s) for s in shapes])
+            hull = ConvexHull(v)
+            v = v[hull.vertices]
+            centre = v.mean(axis=0)
+            radius = float(np.linalg.norm(v - centre, axis=1).max())
+            self.hulls.append(LinkHull(i, link.name, hull.equations, v, centre, radius))
+            if link.name.endswith(on_table):
+                self.on_table.add(i)
+
+    def touches(
+        self,
+        q: np.ndarray,
+        points: np.ndarray,
+        tree: cKDTree | None,
+        margin: float,
+        table_z: float = 0.0,
+        skip: tuple[str, ...] = (),
+    ) -> str | None:
+        """The name of the first link that comes within `margin` of a known point (`tree`
+        over `points`, world frame) or of the table's plane at `table_z`; None if none.
+        Links whose name ends in one of `skip` are not checked."""
+        hulls = [h for h in self.hulls if not h.name.endswith(skip)] if skip else self.hulls
+        poses = self.kinematics.link_poses(q, [h.index for h in hulls])
+        for h, T in zip(hulls, poses, strict=True):
+            R, t = T[:3, :3], T[:3, 3]
+            if h.index not in self.on_table and (h.vertices @ R[2] + t[2]).min() < table_z + margin:
+                return h.name
+            if tree is None:
+                continue
+            near = tree.query_ball_point(R @ h.centre + t, h.radius + margin)
+            if not near:
+                continue
+            local = (points[near] - t) @ R  # world -> link frame
+            inside = local @ h.faces[:, :3].T + h.faces[:, 3] <= margin
+            if np.any(inside.all(axis=1)):
+                return h.name
+        return None
+
+
+def surface_points(geometry, count: int = 4000) -> np.ndarray:
+    """Points on a hole object's surface (its body frame), about 1 cm apart on a 20 cm
+    body, with its vertices: enough for an arm link (5 cm and more across) to contain some
+    wherever it crosses the body. Drawn with a fixed seed: the same for every episode."""
+    mesh = geometry.visual_trimesh()
+    sampled, _ = trimesh.sample.sample_surface(mesh, count, seed=0)
+    return np.concatenate([np.asarray(mesh.vertices, np.float64), sampled])

@@ -81,8 +81,9 @@ class ExecutorConfig:
     """Plan a collision-free joint path (control/planner.py) when a move's straight line
     would touch what the camera has seen or the table, or cannot be followed. False: the
     paper's straight lines only."""
-    joint_speed: float = 1.0
-    """Joint speed along planned paths, rad/s (a third of the UR5's wrist limit)."""
+    joint_speed: float = 0.5
+    """Joint speed along planned paths, rad/s: slow enough that the arm's lag behind the
+    path stays inside the planner's margin."""
     planner: PlannerConfig = field(default_factory=PlannerConfig)
 
 
@@ -125,9 +126,10 @@ class Executor:
         self.last_target = None
         self.phase = ""
         if self.planner is not None:
-            self.planner.world.clear()
+            self.planner.forget()
             if obs is not None:
-                self.planner.world.add_observation(obs, self.robot.tcp(), self.robot.peg)
+                r = self.robot
+                self.planner.observe(obs, r.joints(), r.tcp(), r.peg)
 
     @property
     def insertion_mode(self) -> str:
@@ -159,7 +161,7 @@ class Executor:
             return MoveResult(False, "target pose is not a finite 4x4 matrix")
         q0 = self.robot.joints()
         path, reason = self._straight_path(target, q0)
-        if self.planner is not None and (path is None or not self.planner.path_free([q0, *path])):
+        if self.planner is not None and (path is None or self._needs_plan(target, [q0, *path])):
             planned = self.planner.plan(q0, target)
             if planned is not None:
                 path = self._timed(planned)
@@ -185,6 +187,17 @@ class Executor:
                 self.steps - steps0,
             )
         return MoveResult(True, "", self.steps - steps0)
+
+    def _needs_plan(self, target: np.ndarray, line: list[np.ndarray]) -> bool:
+        """Whether a followable straight line would touch a known obstacle (small moves
+        near the part are the agent's to make: never planned)."""
+        start = self.robot.tcp()
+        small = np.linalg.norm(
+            target[:3, 3] - start[:3, 3]
+        ) < self.cfg.planner.small_move and G.rot_angle(
+            start[:3, :3].T @ target[:3, :3]
+        ) < np.radians(5.0)
+        return not small and not self.planner.path_free(line)
 
     def _straight_path(self, target: np.ndarray, q: np.ndarray) -> tuple[list | None, str]:
         """Joint waypoints of the straight Cartesian line to `target` at the speed limits
@@ -222,7 +235,8 @@ class Executor:
         """Observe, and add what the camera saw to the planner's known world."""
         self.last_obs = self.robot.observe()
         if self.planner is not None:
-            self.planner.world.add_observation(self.last_obs, self.robot.tcp(), self.robot.peg)
+            r = self.robot
+            self.planner.observe(self.last_obs, r.joints(), r.tcp(), r.peg)
 
     def insert(self, depth: float, entry: float = 0.0) -> MoveResult:
         """Push the peg `depth` metres along its own axis (its +z), with bounded force.

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from cfvs_maniskill.perception.clouds import object_points, tool_to_world
-from cfvs_maniskill.robots.collision import ArmCollision
+from cfvs_maniskill.robots.collision import ArmCollision, on_arm
 
 
 @dataclass
@@ -27,10 +27,14 @@ class PlannerConfig:
     """Clearance kept from known points and the table, m (a voxel's half diagonal less)."""
     voxel: float = 0.01
     """Occupancy resolution, m."""
+    small_move: float = 0.02
+    """Moves of the tcp shorter than this (m, and turning under 5 deg) stay straight lines
+    without a check: the fine stage's corrections near the part it is servoing to."""
     extend: float = 0.15
     """Longest RRT extension, rad (joint-space distance)."""
-    check_step: float = 0.02
-    """Joint-space spacing at which an edge is checked, rad (2 cm at the peg's tip)."""
+    check_step: float = 0.008
+    """Joint-space spacing at which an edge is checked, rad: under the margin at the
+    peg's tip, about 1 m from the shoulder."""
     max_samples: int = 3000
     """Random configurations tried before the search gives up."""
     goal_seeds: int = 12
@@ -45,26 +49,21 @@ class KnownWorld:
 
     def __init__(self, voxel: float):
         self.voxel = voxel
-        self._keys: set[tuple[int, int, int]] = set()
+        self.clear()
+
+    def clear(self) -> None:
+        self._keys = np.zeros((0, 3), np.int64)
         self.points = np.zeros((0, 3))
         self.tree: cKDTree | None = None
 
-    def clear(self) -> None:
-        self._keys.clear()
-        self.points, self.tree = np.zeros((0, 3)), None
-
-    def add_observation(self, obs, tcp: np.ndarray, peg: str) -> None:
-        """Add what a pointcloud observation saw (other observation modes add nothing)."""
-        cloud = obs.get("pointcloud") if isinstance(obs, dict) else None
-        if cloud is None or "xyzw" not in cloud:
+    def add_points(self, world: np.ndarray) -> None:
+        """Add points (world frame) to the occupied voxels."""
+        keys = np.floor(world / self.voxel).astype(np.int64)
+        keys = np.unique(np.concatenate([self._keys, keys]), axis=0)
+        if len(keys) == len(self._keys):
             return
-        xyzw = cloud["xyzw"][0].cpu().numpy()
-        world = tool_to_world(object_points(xyzw, tcp, peg), tcp)
-        keys = {tuple(k) for k in np.floor(world / self.voxel).astype(np.int64)}
-        if keys <= self._keys:
-            return
-        self._keys |= keys
-        self.points = (np.array(sorted(self._keys), np.float64) + 0.5) * self.voxel
+        self._keys = keys
+        self.points = (keys + 0.5) * self.voxel
         self.tree = cKDTree(self.points)
 
 
@@ -76,9 +75,31 @@ class PathPlanner:
         self.low, self.high = (np.asarray(a, np.float64) for a in limits)
         self.cfg = cfg or PlannerConfig()
         self.world = KnownWorld(self.cfg.voxel)
+        self._seen: list = []
+
+    def observe(self, obs, q: np.ndarray, tcp: np.ndarray, peg: str) -> None:
+        """Note a pointcloud observation taken at joints q (other observation modes add
+        nothing); its points join the known world when a check first needs them."""
+        cloud = obs.get("pointcloud") if isinstance(obs, dict) else None
+        if cloud is not None and "xyzw" in cloud:
+            self._seen.append((cloud["xyzw"][0].cpu().numpy(), q.copy(), tcp.copy(), peg))
+
+    def forget(self) -> None:
+        """A new episode: nothing is known but the table."""
+        self.world.clear()
+        self._seen = []
+
+    def _update(self) -> None:
+        """What the noted observations saw, except the table and the arm itself."""
+        for xyzw, q, tcp, peg in self._seen:
+            world = tool_to_world(object_points(xyzw, tcp, peg), tcp)
+            self.world.add_points(world[~on_arm(self.collision, q, world, 2 * self.cfg.margin)])
+        self._seen = []
 
     def blocked_by(self, q: np.ndarray) -> str | None:
         """The link of configuration q that would touch a known obstacle, or None."""
+        if self._seen:
+            self._update()
         w = self.world
         return self.collision.touches(q, w.points, w.tree, self.cfg.margin)
 

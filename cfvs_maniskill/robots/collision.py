@@ -88,6 +88,20 @@ class ArmCollision:
         return None
 
 
+def on_arm(collision: ArmCollision, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
+    """Mask of the points (world) within `margin` of the arm at joints q: what a camera
+    sees of the robot itself, which is no obstacle."""
+    mask = np.zeros(len(points), bool)
+    poses = collision.kinematics.link_poses(q, [h.index for h in collision.hulls])
+    for h, T in zip(collision.hulls, poses, strict=True):
+        near = np.flatnonzero(
+            np.linalg.norm(points - (T[:3, :3] @ h.centre + T[:3, 3]), axis=1) <= h.radius + margin
+        )
+        local = (points[near] - T[:3, 3]) @ T[:3, :3]
+        mask[near[(local @ h.faces[:, :3].T + h.faces[:, 3] <= margin).all(axis=1)]] = True
+    return mask
+
+
 def surface_points(geometry, count: int = 4000) -> np.ndarray:
     """Points on a hole object's surface (its body frame), about 1 cm apart on a 20 cm
     body, with its vertices: enough for an arm link (5 cm and more across) to contain some

@@ -1,0 +1,53 @@
+"""Moves plan around what the camera has seen, and every scene the task samples is one
+the arm can solve."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cfvs_maniskill.control.executor import Executor
+from cfvs_maniskill.session import open_session
+
+
+def test_a_move_plans_around_a_seen_obstacle_on_its_straight_line(make_env):
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud", init_error="large")
+    u = env.unwrapped
+    obs, _ = env.reset(seed=11)
+    ex = Executor(env)
+    ex.reset(obs)
+    target = u.insertion_pose(-0.03)
+    q0 = ex.robot.joints()
+    line, _ = ex._straight_path(target, q0)
+    assert ex.planner.path_free([q0, *line]), "the scene's own straight line is free"
+    # A 4 cm block of seen points where one of the arm's links passes halfway along the
+    # line, clear of where the arm starts and ends.
+    planner, halfway = ex.planner, line[len(line) // 2]
+    grid = np.stack(np.meshgrid(*[np.linspace(-0.02, 0.02, 5)] * 3), -1).reshape(-1, 3)
+    hulls = planner.collision.hulls
+    for h, T in zip(hulls, u.kinematics.link_poses(halfway, [h.index for h in hulls]), strict=True):
+        planner.world.clear()
+        planner.world.add_points(T[:3, :3] @ h.centre + T[:3, 3] + grid)
+        if planner.blocked_by(q0) is None and planner.blocked_by(line[-1]) is None:
+            break
+    else:
+        raise AssertionError("no link's halfway place is clear of the start and the goal")
+    assert not planner.path_free([q0, *line])
+    block, tree = planner.world.points.copy(), planner.world.tree
+    visited = []
+    ex.on_step = lambda e: visited.append(e.robot.joints())
+    result = ex.move_to(target)
+    assert result.ok, result.reason
+    assert ex.planned_moves == 1
+    # The arm lags its commanded path; the planner's margin covers that lag.
+    touching = [q for q in visited if planner.collision.touches(q, block, tree, 0.0)]
+    assert not touching, f"{len(touching)} of {len(visited)} steps touch the block"
+
+
+def test_the_oracle_solves_a_scene_whose_first_arm_branch_dipped_into_the_table(make_env):
+    """PegInsert6DoF, cuboid_test_2 at 30 cm: the IK branch from home put the upper arm
+    into the table and the oracle's move stopped 22 cm short."""
+    env = make_env(
+        "PegInsert6DoF-v1", obs_mode="pointcloud", objects=["cuboid_test_2"], init_error="large"
+    )
+    result = open_session(env, "oracle").episode(731383209)
+    assert result.success, result.reason

@@ -29,10 +29,16 @@ class LinkHull:
 
 
 def _shape_vertices(shape) -> np.ndarray:
-    """A PhysX collision shape's vertices in its link's frame (convex meshes and boxes)."""
+    """A PhysX collision shape's vertices in its link's frame (convex meshes, boxes, and
+    cylinders as 32-sided prisms around their circle, along the shape's x as PhysX has it)."""
     if hasattr(shape, "half_size"):
         h = np.asarray(shape.half_size, np.float64)
         v = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * h
+    elif hasattr(shape, "half_length"):
+        a = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+        r = shape.radius / np.cos(np.pi / 32)  # the prism contains the cylinder
+        ring = np.c_[np.zeros(32), r * np.cos(a), r * np.sin(a)]
+        v = np.concatenate([ring + [-shape.half_length, 0, 0], ring + [shape.half_length, 0, 0]])
     else:
         v = np.asarray(shape.vertices, np.float64) * np.asarray(shape.scale, np.float64)
     return v @ G.to_matrix(shape.local_pose)[:3, :3].T + G.to_matrix(shape.local_pose)[:3, 3]

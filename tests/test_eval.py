@@ -568,3 +568,25 @@ def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys, monkey
     with pytest.raises(SystemExit) as e:
         unbuildable(["kovis"], {t: TASKS[t] for t in ["PegInsert4DoF", "PegInsert6DoF"]})
     assert e.value.code == 2
+
+
+def test_compressed_records_are_read_and_a_resumed_run_appends_beside_them(tmp_path):
+    """Finished runs are kept as episodes.jsonl.gz in the repository: the report reads
+    them, and a resumed run counts them done and appends new records beside them."""
+    import gzip
+
+    from cfvs_maniskill.eval.results import append, read_done
+    from cfvs_maniskill.report.load import load_records
+
+    lines = gzip.decompress((ROOT / "results/ablation/episodes.jsonl.gz").read_bytes())
+    records = [json.loads(x) for x in lines.splitlines()]
+    assert len(load_records(ROOT / "results" / "ablation")) == len(records) == 5200
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "episodes.jsonl.gz").write_bytes(gzip.compress(b"\n".join(lines.splitlines()[:10])))
+    path = run / "episodes.jsonl"
+    assert len(read_done(path)) == 10
+    append(path, {**records[10]})
+    done = read_done(path)
+    assert len(done) == 11 and records[10]["key"] in done
+    assert len(load_records(run)) == 11

@@ -3,6 +3,7 @@ time, so any kill loses at most the episode that was running."""
 
 from __future__ import annotations
 
+import gzip
 import json
 import os
 from pathlib import Path
@@ -12,17 +13,34 @@ class ResultsError(ValueError):
     """A results file that cannot be resumed; the message names the file and the line."""
 
 
+def read_text(path: Path) -> str:
+    """A result file's text; `.gz` files (finished runs, compressed for the repository)
+    are read through gzip."""
+    if path.suffix == ".gz":
+        return gzip.decompress(path.read_bytes()).decode()
+    return path.read_text()
+
+
+def compressed(path: Path) -> Path:
+    """Where a finished run's records are kept compressed: episodes.jsonl.gz."""
+    return path.with_name(path.name + ".gz")
+
+
 def read_done(path: Path) -> dict[str, dict]:
-    """Finished records by job key. A torn last line (a kill mid-write: no final newline)
-    is cut off the file and its job runs again; a bad complete line is an error naming it."""
+    """Finished records by job key, from `path` and its compressed copy (a run resumed after
+    its records were compressed appends to `path`). A torn last line (a kill mid-write: no
+    final newline) is cut off the file and its job runs again; a bad complete line is an
+    error naming it."""
+    done: dict[str, dict] = {}
+    if compressed(path).exists():
+        done = {r["key"]: r for r in map(json.loads, read_text(compressed(path)).splitlines())}
     if not path.exists():
-        return {}
+        return done
     raw = path.read_bytes()
     end = raw.rfind(b"\n") + 1  # everything after the last newline is torn
     if end < len(raw):
         with open(path, "r+b") as f:
             f.truncate(end)
-    done: dict[str, dict] = {}
     for i, line in enumerate(raw[:end].split(b"\n")):
         if not line.strip():
             continue

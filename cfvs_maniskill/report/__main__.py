@@ -60,7 +60,7 @@ def check(records: list[dict], crashed: list[dict], readme: Path | None) -> int:
 
 
 def main(args: ReportArgs) -> int:
-    from cfvs_maniskill.report import plots, residuals, tables, videos
+    from cfvs_maniskill.report import plots, residuals, style, tables, videos
     from cfvs_maniskill.report.load import load_records
 
     if not args.results.is_dir():
@@ -94,14 +94,23 @@ def main(args: ReportArgs) -> int:
             print(f"error: {e}", file=sys.stderr)
             return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    pngs = [
-        plots.success_per_agent(records, args.out),
-        plots.success_vs_tilt(records, args.out),
-        plots.servo_times(records, args.out),
+    main_recs, variant_recs = plots.heads(records), plots.variants(records)
+    pngs = [  # one figure per question, the paper's comparison first
+        plots.success_vs_tilt(main_recs or records, args.out),
+        plots.success_per_agent(main_recs or records, args.out),
+        plots.servo_times(main_recs or records, args.out),
     ]
     residual_png = residuals.plot(records, args.out)
     if residual_png is not None:
         pngs.append(residual_png)
+    variant_pngs = []
+    if main_recs and variant_recs:  # each variant beside its own agent
+        family = {style.family(r["label"]) for r in variant_recs}
+        beside = [r for r in main_recs if r["label"] in family] + variant_recs
+        variant_pngs = [
+            plots.success_vs_tilt(beside, args.out, name="variants_success_vs_tilt"),
+            plots.success_per_agent(beside, args.out, name="variants_success"),
+        ]
     if args.videos:
         picks = videos.pick(records, variants=args.video_variants)
         shown = videos.render(picks, args.out / "videos", args.assets)
@@ -125,8 +134,10 @@ def main(args: ReportArgs) -> int:
             residuals.table(records),
             "## Provenance: which code and files each agent's records come from",
             tables.table_provenance(records, crashed),
-            "## Plots",
+            "## Plots: the agents (CFVS, the paper's baselines, the oracle)",
             "\n".join(f"![{p.stem}]({p.name})" for p in pngs),
+            "## Plots: variants (ablations, other weights or settings) beside their agent",
+            "\n".join(f"![{p.stem}]({p.name})" for p in variant_pngs) or "No variants here.",
             "## Videos: first success and first failure per agent and task",
             video_md,
         ]

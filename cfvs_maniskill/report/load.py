@@ -1,4 +1,5 @@
-"""Result records from every *.jsonl below a folder (eval runs and run-command files)."""
+"""Result records from every *.jsonl (or *.jsonl.gz: finished runs, compressed for the
+repository) below a folder (eval runs and run-command files)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import json
 import sys
 from pathlib import Path
 
+from cfvs_maniskill.eval.results import read_text
 from cfvs_maniskill.objects.library import load_library
 
 
@@ -47,12 +49,12 @@ def load_records(
     known = set(load_library(assets).specs)
     out, other = [], 0
     crashed = [] if crashed is None else crashed
-    for f in sorted(root.rglob("*.jsonl")):
+    for f in sorted([*root.rglob("*.jsonl"), *root.rglob("*.jsonl.gz")]):
         if "archive" in f.relative_to(root).parts[:-1]:
             continue  # earlier measurements kept for the record (other code, settings)
         folder = f.parent.name if f.parent != root else None
         by_key: dict = {}  # an eval's job re-run (--retry-crashed) replaces its record
-        for i, line in enumerate(f.read_text().splitlines()):
+        for i, line in enumerate(read_text(f).splitlines()):
             if not line.strip():
                 continue
             try:

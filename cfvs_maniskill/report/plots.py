@@ -40,7 +40,17 @@ def _rate(ok: list[bool]) -> tuple[float, float, float]:
     return k / n, lo, hi
 
 
-def success_per_agent(records: list[dict], out: Path) -> Path:
+def heads(records: list[dict]) -> list[dict]:
+    """The records of the families' own agents (CFVS, the baselines, the oracle): the
+    paper's comparison; the rest are variants (ablations, other weights or settings)."""
+    return [r for r in records if r["label"] == style.family(r["label"])]
+
+
+def variants(records: list[dict]) -> list[dict]:
+    return [r for r in records if r["label"] != style.family(r["label"])]
+
+
+def success_per_agent(records: list[dict], out: Path, name: str = "success_per_agent") -> Path:
     """One panel per task: a horizontal bar per label (family colour, variant hatch) with
     its 95% interval."""
     tasks = sorted({r["task"] for r in records})
@@ -74,12 +84,14 @@ def success_per_agent(records: list[dict], out: Path) -> Path:
         ax.grid(axis="x", alpha=0.3)
     for ax in list(axes.flat)[len(tasks) :]:
         ax.set_visible(False)
-    return _save(fig, out / "success_per_agent.png")
+    return _save(fig, out / f"{name}.png")
 
 
-def success_vs_tilt(records: list[dict], out: Path, task: str = "PegInsert6DoF") -> Path:
-    """Success per 10-deg bin of hole tilt on `task`, 95% bands; the agents side by side in
-    the first panel, each family's variants in the next ones."""
+def success_vs_tilt(
+    records: list[dict], out: Path, task: str = "PegInsert6DoF", name: str = "success_vs_tilt"
+) -> Path:
+    """Success per 10-deg bin of hole tilt on `task`, 95% bands (the paper's Fig. 6); the
+    agents side by side, a family's variants beside their agent in panels of their own."""
     recs = [r for r in records if r["task"] == task]
     labels = sorted({line_label(r) for r in recs})
     groups = style.panels(labels) or [("agents", [])]
@@ -108,10 +120,10 @@ def success_vs_tilt(records: list[dict], out: Path, task: str = "PegInsert6DoF")
         ax.set_visible(False)
     for row in axes:
         row[0].set_ylabel("success (95% band)")
-    return _save(fig, out / "success_vs_tilt.png")
+    return _save(fig, out / f"{name}.png")
 
 
-def servo_times(records: list[dict], out: Path) -> Path:
+def servo_times(records: list[dict], out: Path, name: str = "servo_time") -> Path:
     """Simulated servo time of the successes, a box per label in its family's colour."""
     labels = sorted({r["label"] for r in records})
     look = style.looks(labels)
@@ -126,4 +138,4 @@ def servo_times(records: list[dict], out: Path) -> Path:
     ax.set_ylabel("simulated servo time of successes (s)")
     ax.tick_params(axis="x", labelrotation=60, labelsize=7)
     ax.grid(axis="y", alpha=0.3)
-    return _save(fig, out / "servo_time.png")
+    return _save(fig, out / f"{name}.png")

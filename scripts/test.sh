@@ -6,4 +6,4 @@ bash scripts/setup.sh
 .venv/bin/ruff check .
 .venv/bin/ruff format --check .
 # Two workers (pytest-xdist) on the 2 cores; tests marked xdist_group share one worker.
-.venv/bin/python -m pytest -q -n 2 --dist loadgroup "$@"
+.venv/bin/python -m pytest -q -n 2 --dist loadgroup --durations=15 "$@"

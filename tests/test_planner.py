@@ -33,6 +33,8 @@ def test_a_move_plans_around_a_seen_obstacle_on_its_straight_line(make_env):
         raise AssertionError("no link's halfway place is clear of the start and the goal")
     assert not planner.path_free([q0, *line])
     block, tree = planner.world.points.copy(), planner.world.tree
+    path = planner.plan(q0, target)
+    assert np.allclose(path[0], q0) and u.kinematics._reaches(path[-1], target)
     visited = []
     ex.on_step = lambda e: visited.append(e.robot.joints())
     result = ex.move_to(target)

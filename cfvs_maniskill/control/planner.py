@@ -133,7 +133,8 @@ class PathPlanner:
     def _connect(self, q0: np.ndarray, goal: np.ndarray, rng) -> list[np.ndarray] | None:
         if self.edge_free(q0, goal):
             return [q0, goal]
-        trees = ([q0], [None]), ([goal], [None])  # (nodes, parent index) from each end
+        start_tree = ([q0], [None])  # (nodes, parent index)
+        trees = start_tree, ([goal], [None])
         for _ in range(self.cfg.max_samples):
             sample = rng.uniform(self.low, self.high)
             grow, other = trees
@@ -142,8 +143,8 @@ class PathPlanner:
                 j = self._reach(other, grow[0][i])
                 if j is not None:
                     a, b = self._branch(grow, i), self._branch(other, j)
-                    path = a[::-1] + b
-                    return path if grow is trees[0] else path[::-1]
+                    path = a[::-1] + b[1:]  # root of `grow` ... meeting point ... root of `other`
+                    return path if grow is start_tree else path[::-1]
             trees = trees[1], trees[0]
         return None
 

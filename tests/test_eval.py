@@ -546,7 +546,7 @@ def test_compressed_records_are_read_and_a_resumed_run_appends_beside_them(tmp_p
     from cfvs_maniskill.eval.results import append, read_done
     from cfvs_maniskill.report.load import load_records
 
-    lines = gzip.decompress((ROOT / "results/ablation/episodes.jsonl.gz").read_bytes())
+    lines = gzip.decompress((ROOT / "results/cfvs_ablations/episodes.jsonl.gz").read_bytes())
     records = [json.loads(x) for x in lines.splitlines()]
     assert len(load_records(ROOT / "results" / "ablation")) == len(records) == 5200
     run = tmp_path / "run"

@@ -10,14 +10,10 @@ import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils.structs.types import SceneConfig, SimConfig
-from scipy.spatial import cKDTree
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.constants import (
-    PRE_INSERT_HEIGHT,
-)
 from cfvs_maniskill.envs.options import check_options, depth_noise, start_distance
-from cfvs_maniskill.envs.scene import sample_object_pose, sample_start, score
+from cfvs_maniskill.envs.scene import sample_object_pose, sample_start, score, solvable_start
 from cfvs_maniskill.envs.state import read_task_state, task_state, unflatten
 from cfvs_maniskill.envs.task_config import TaskConfig, load_task
 from cfvs_maniskill.objects.build import build_geometry
@@ -33,7 +29,6 @@ from cfvs_maniskill.robots.ur5 import (
     TCP_LINK,
     TOOL_LINK,
     robot_uid_for,
-    start_seeds,
 )
 from cfvs_maniskill.sensing.model import SensorModel
 from cfvs_maniskill.sensing.profile import load_profile
@@ -284,7 +279,9 @@ class PegInsertEnv(BaseEnv):
         for _ in range(MAX_INIT_TRIES):
             T_obj, H = sample_object_pose(rng, cfg, geom)
             T_start = sample_start(rng, cfg, H, self.init_error_m)
-            q0 = self._solvable_start(T_obj, H, T_start, self._surfaces[idx])
+            q0 = solvable_start(
+                cfg, self.kinematics, self.collision, T_obj, H, T_start, self._surfaces[idx]
+            )
             if q0 is not None:
                 break
         else:
@@ -298,27 +295,6 @@ class PegInsertEnv(BaseEnv):
         qt = torch.as_tensor(q0, dtype=torch.float32)[None]
         self.agent.reset(qt)
         self.episode_info = self._describe_episode()
-
-    def _solvable_start(self, T_obj, H, T_start, surface) -> np.ndarray | None:
-        """Joints for the start pose from which the pre-insertion and the inserted pose are
-        reachable along one IK branch, with the arm clear of the table and the object at
-        all three (the peg itself may be in the hole at the last); None if no branch is."""
-        cfg = self.task
-        obstacle = surface @ T_obj[:3, :3].T + T_obj[:3, 3]
-        tree = cKDTree(obstacle)
-        for seed in start_seeds(T_start):
-            q0, ok0 = self.ik(T_start, seed)
-            q1, ok1 = self.ik(self.insertion_pose(-PRE_INSERT_HEIGHT, H, T_start), q0)
-            q2, ok2 = self.ik(self.insertion_pose(cfg.hole_depth - 0.002, H, T_start), q1)
-            if not (ok0 and ok1 and ok2):
-                continue
-            clear = all(
-                self.collision.touches(q, obstacle, tree, 0.0, skip=skip) is None
-                for q, skip in ((q0, ()), (q1, ()), (q2, ("peg",)))
-            )
-            if clear:
-                return q0
-        return None
 
     def _describe_episode(self) -> dict[str, Any]:
         H = self.hole_pose

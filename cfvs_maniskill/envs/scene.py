@@ -4,10 +4,12 @@ start are drawn, and whether a peg pose in the hole's frame counts as inserted."
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import (
+    PRE_INSERT_HEIGHT,
     SUCCESS_LATERAL_MARGIN,
     SUCCESS_MAX_TILT_DEG,
     SUCCESS_TIP_TOLERANCE,
@@ -15,6 +17,8 @@ from cfvs_maniskill.constants import (
     peg_half_extent,
 )
 from cfvs_maniskill.envs.task_config import TaskConfig
+from cfvs_maniskill.robots.poses import insertion_pose
+from cfvs_maniskill.robots.ur5 import start_seeds
 
 
 def sample_object_pose(
@@ -48,6 +52,27 @@ def sample_start(
     roll = np.radians(rng.uniform(-cfg.init_roll_deg, cfg.init_roll_deg))
     c, s = np.cos(roll), np.sin(roll)
     return G.make(R @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]), p)
+
+
+def solvable_start(
+    cfg: TaskConfig, kinematics, collision, T_obj, H, T_start, surface
+) -> np.ndarray | None:
+    """Joints for the start pose T_start from which the pre-insertion and the inserted pose
+    are reachable along one IK branch, with the arm clear of the table and of the object
+    (`surface`: points on it, body frame; object pose T_obj, hole frame H) at all three, the
+    peg excepted at the last (it is in the hole); None if no branch is."""
+    obstacle = surface @ T_obj[:3, :3].T + T_obj[:3, 3]
+    tree = cKDTree(obstacle)
+    for seed in start_seeds(T_start):
+        q0, ok0 = kinematics.ik(T_start, seed)
+        q1, ok1 = kinematics.ik(insertion_pose(cfg.peg, H, -PRE_INSERT_HEIGHT, T_start), q0)
+        q2, ok2 = kinematics.ik(insertion_pose(cfg.peg, H, cfg.hole_depth - 0.002, T_start), q1)
+        if not (ok0 and ok1 and ok2):
+            continue
+        checks = ((q0, ()), (q1, ()), (q2, ("peg",)))
+        if all(collision.touches(q, obstacle, tree, 0.0, skip=skip) is None for q, skip in checks):
+            return q0
+    return None
 
 
 def score(cfg: TaskConfig, tip_in_hole: np.ndarray) -> dict[str, float | bool]:

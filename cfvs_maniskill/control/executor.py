@@ -6,7 +6,8 @@ all of them, so their success rates and servo times compare fairly.
 * Moves are straight lines in Cartesian space (slerp in rotation) at most `max_speed`
   (0.5 m/s) and `max_turn` (90 deg/s): half the UR5's tool speed, near parts. Every
   waypoint is solved by IK (Pinocchio, seeded by the previous one); an unreachable target is
-  reported, never silently held.
+  reported, never silently held. A line that would touch what the camera has seen (or the
+  table), or cannot be followed, is replaced by a planned joint path (planner.py).
 * Servo time is simulated time: control steps x 0.05 s.
 * `insert` moves the peg down its own axis with limited force: the commanded pose may lead
   the real tip by at most `max_lead` (4 mm), which with the arm's joint stiffness bounds the
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -39,8 +41,7 @@ class MoveResult:
 @dataclass
 class ExecutorConfig:
     max_speed: float = 0.5
-    """Tool speed limit, m/s (half the UR5's 1 m/s; measured: 0.25 m/s gave the same
-    success and 1.1 s more servo time)."""
+    """Tool speed limit, m/s (half the UR5's 1 m/s; half of this gave the same success)."""
     max_turn: float = np.radians(90.0)
     """Tool rotation speed limit, rad/s."""
     settle_steps: int = 3
@@ -88,7 +89,7 @@ class ExecutorConfig:
 
 
 class Executor:
-    def __init__(self, robot: Robot | object, cfg: ExecutorConfig | None = None):
+    def __init__(self, robot: Robot | Any, cfg: ExecutorConfig | None = None):
         """`robot`: a Robot, or a PegInsertEnv (or its gym wrapper) to drive as one."""
         self.robot: Robot = robot if isinstance(robot, Robot) else SimRobot(robot)
         self.cfg = cfg or ExecutorConfig()

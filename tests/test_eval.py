@@ -274,7 +274,7 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
     import numpy as np
 
     results = _results_folder(reference, tmp_path)
-    # An episode of an agent whose weights are missing here: listed, not rendered.
+    # An episode of an agent this code no longer has: listed, not rendered, saying why.
     odd = {**next(iter(reference.values())), "agent": "cfvs_no_aug", "key": "odd"}
     with open(results / "eval" / "episodes.jsonl", "a") as f:
         f.write(json.dumps(odd) + "\n")
@@ -284,7 +284,7 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
     text = (out / "README.md").read_text()
     shown = text.split("## Videos")[1]
     row = next(x for x in shown.splitlines() if x.startswith("| PegInsert3DoF | cfvs_no_aug |"))
-    assert "not rendered" in row and "round/oakn_noaug.pt" in row
+    assert "not rendered" in row and "unknown agent 'cfvs_no_aug'" in row
     outcomes = {(v["agent"], v["success"]) for v in reference.values()}
     for agent, success in outcomes:  # first success and first failure of each agent
         name = f"PegInsert3DoF_{agent}_{'success' if success else 'failure'}.mp4"
@@ -548,7 +548,7 @@ def test_compressed_records_are_read_and_a_resumed_run_appends_beside_them(tmp_p
 
     lines = gzip.decompress((ROOT / "results/cfvs_ablations/episodes.jsonl.gz").read_bytes())
     records = [json.loads(x) for x in lines.splitlines()]
-    assert len(load_records(ROOT / "results" / "ablation")) == len(records) == 5200
+    assert len(load_records(ROOT / "results" / "cfvs_ablations")) == len(records) == 5200
     run = tmp_path / "run"
     run.mkdir()
     (run / "episodes.jsonl.gz").write_bytes(gzip.compress(b"\n".join(lines.splitlines()[:10])))

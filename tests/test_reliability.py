@@ -171,6 +171,9 @@ def _limit_file_size(limit: int):
 
 
 def test_disk_full_while_writing_results_keeps_the_file_readable(eval_reference, tmp_path):
+    """The limit holds for the workers too (a full disk does): one that cannot write what
+    its renderer maps dies and its job is recorded as crashed; the second run, with room
+    again and --retry-crashed, leaves exactly the reference's outcomes."""
     cmd = [sys.executable, "-m", "cfvs_maniskill.eval", *EVAL_ARGS, "--out", str(tmp_path)]
     one = len(json.dumps(next(iter(eval_reference.values())))) + 1
     r = subprocess.run(
@@ -182,7 +185,7 @@ def test_disk_full_while_writing_results_keeps_the_file_readable(eval_reference,
     assert "Traceback" not in r.stderr
     kept = _records(results)  # every line whole
     assert 1 <= len(kept) < EVAL_JOBS
-    r = run_cli("cfvs_maniskill.eval", *EVAL_ARGS, "--out", str(tmp_path))
+    r = run_cli("cfvs_maniskill.eval", *EVAL_ARGS, "--out", str(tmp_path), "--retry-crashed")
     assert r.returncode == 0, r.stderr[-2000:]
     assert _outcomes(_records(results)) == _outcomes(eval_reference)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cfvs_maniskill.control.executor import Executor
+from cfvs_maniskill.control.executor import Executor, _gap
 from cfvs_maniskill.session import open_session
 
 
@@ -17,7 +17,8 @@ def test_a_move_plans_around_a_seen_obstacle_on_its_straight_line(make_env):
     ex.reset(obs)
     target = u.insertion_pose(-0.03)
     q0 = ex.robot.joints()
-    line, _ = ex._straight_path(target, q0)
+    start = u.tcp_matrix()
+    line, _ = ex._straight_path(start, target, q0, *_gap(start, target))
     assert ex.planner.path_free([q0, *line]), "the scene's own straight line is free"
     # A 4 cm block of seen points where one of the arm's links passes halfway along the
     # line, clear of where the arm starts and ends.

@@ -88,6 +88,11 @@ class ExecutorConfig:
     planner: PlannerConfig = field(default_factory=PlannerConfig)
 
 
+def _gap(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """How far tcp pose b is from a: distance (m) and turn (rad)."""
+    return float(np.linalg.norm(b[:3, 3] - a[:3, 3])), G.rot_angle(a[:3, :3].T @ b[:3, :3])
+
+
 class Executor:
     def __init__(self, robot: Robot | Any, cfg: ExecutorConfig | None = None):
         """`robot`: a Robot, or a PegInsertEnv (or its gym wrapper) to drive as one."""
@@ -129,8 +134,7 @@ class Executor:
         if self.planner is not None:
             self.planner.forget()
             if obs is not None:
-                r = self.robot
-                self.planner.observe(obs, r.joints(), r.tcp(), r.peg)
+                self._note(obs)
 
     @property
     def insertion_mode(self) -> str:
@@ -160,9 +164,14 @@ class Executor:
         seen (or the table) or cannot be followed."""
         if target.shape != (4, 4) or not np.all(np.isfinite(target)):
             return MoveResult(False, "target pose is not a finite 4x4 matrix")
-        q0 = self.robot.joints()
-        path, reason = self._straight_path(target, q0)
-        if self.planner is not None and (path is None or self._needs_plan(target, [q0, *path])):
+        q0, start = self.robot.joints(), self.robot.tcp()
+        dist, turn = _gap(start, target)
+        path, reason = self._straight_path(start, target, q0, dist, turn)
+        small = dist < self.cfg.planner.small_move and turn < np.radians(5.0)
+        # Small moves near the part are the agent's to make: never planned.
+        if self.planner is not None and (
+            path is None or (not small and not self.planner.path_free([q0, *path]))
+        ):
             planned = self.planner.plan(q0, target)
             if planned is not None:
                 path = self._timed(planned)
@@ -178,9 +187,8 @@ class Executor:
         for _ in range(self.cfg.settle_steps):
             self._step(path[-1])
         self._look()  # one observation, where the agent looks next
-        got = self.robot.tcp()
-        err = np.linalg.norm(got[:3, 3] - target[:3, 3])
-        err_rot = np.degrees(G.rot_angle(got[:3, :3].T @ target[:3, :3]))
+        err, err_rot = _gap(self.robot.tcp(), target)
+        err_rot = np.degrees(err_rot)
         if err > self.cfg.reach_tolerance or err_rot > 3.0:
             return MoveResult(
                 False,
@@ -189,23 +197,12 @@ class Executor:
             )
         return MoveResult(True, "", self.steps - steps0)
 
-    def _needs_plan(self, target: np.ndarray, line: list[np.ndarray]) -> bool:
-        """Whether a followable straight line would touch a known obstacle (small moves
-        near the part are the agent's to make: never planned)."""
-        start = self.robot.tcp()
-        small = np.linalg.norm(
-            target[:3, 3] - start[:3, 3]
-        ) < self.cfg.planner.small_move and G.rot_angle(
-            start[:3, :3].T @ target[:3, :3]
-        ) < np.radians(5.0)
-        return not small and not self.planner.path_free(line)
-
-    def _straight_path(self, target: np.ndarray, q: np.ndarray) -> tuple[list | None, str]:
-        """Joint waypoints of the straight Cartesian line to `target` at the speed limits
-        (one per control step), or None and why it cannot be followed."""
-        start = self.robot.tcp()
-        dist = np.linalg.norm(target[:3, 3] - start[:3, 3])
-        turn = G.rot_angle(start[:3, :3].T @ target[:3, :3])
+    def _straight_path(
+        self, start: np.ndarray, target: np.ndarray, q: np.ndarray, dist: float, turn: float
+    ) -> tuple[list | None, str]:
+        """Joint waypoints (from joints q) of the straight Cartesian line from tcp pose
+        `start` to `target`, `dist` m and `turn` rad apart, at the speed limits (one per
+        control step), or None and why it cannot be followed."""
         n = max(1, int(np.ceil(max(dist / self.cfg.max_speed, turn / self.cfg.max_turn) / self.dt)))
         _, ok = self.robot.ik(target, q)
         if not ok:
@@ -236,8 +233,12 @@ class Executor:
         """Observe, and add what the camera saw to the planner's known world."""
         self.last_obs = self.robot.observe()
         if self.planner is not None:
-            r = self.robot
-            self.planner.observe(self.last_obs, r.joints(), r.tcp(), r.peg)
+            self._note(self.last_obs)
+
+    def _note(self, obs) -> None:
+        """Hand the planner an observation taken where the arm is now."""
+        r = self.robot
+        self.planner.observe(obs, r.joints(), r.tcp(), r.peg)
 
     def insert(self, depth: float, entry: float = 0.0) -> MoveResult:
         """Push the peg `depth` metres along its own axis (its +z), with bounded force.

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from cfvs_maniskill.perception.clouds import object_points, tool_to_world
-from cfvs_maniskill.robots.collision import ArmCollision, on_arm
+from cfvs_maniskill.robots.collision import ArmCollision
 
 
 @dataclass
@@ -93,7 +93,7 @@ class PathPlanner:
         """What the noted observations saw, except the table and the arm itself."""
         for xyzw, q, tcp, peg in self._seen:
             world = tool_to_world(object_points(xyzw, tcp, peg), tcp)
-            self.world.add_points(world[~on_arm(self.collision, q, world, 2 * self.cfg.margin)])
+            self.world.add_points(world[~self.collision.on_arm(q, world, 2 * self.cfg.margin)])
         self._seen = []
 
     def blocked_by(self, q: np.ndarray) -> str | None:

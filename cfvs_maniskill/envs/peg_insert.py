@@ -351,7 +351,7 @@ class PegInsertEnv(BaseEnv):
         if task is not None:
             seed, draws, self._init_error_m = read_task_state(task)
             self.wrist.seek(seed, draws)
-            self.wrist.place_cameras(self.scene.sensors, self.stereo)
+            self.wrist.apply_episode_errors(self.scene.sensors, self.stereo)
         self.object_index = self._active_object()
         self._show_only(self.object_index)
         self._aim_cameras()

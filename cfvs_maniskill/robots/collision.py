@@ -27,6 +27,11 @@ class LinkHull:
     radius: float
     """The hull's bounding sphere in the link frame."""
 
+    def inside(self, points: np.ndarray, T: np.ndarray, margin: float) -> np.ndarray:
+        """Mask of the world `points` within `margin` of the hull posed at T."""
+        local = (points - T[:3, 3]) @ T[:3, :3]  # world -> link frame
+        return (local @ self.faces[:, :3].T + self.faces[:, 3] <= margin).all(axis=1)
+
 
 def _shape_vertices(shape) -> np.ndarray:
     """A PhysX collision shape's vertices in its link's frame (convex meshes, boxes, and
@@ -85,27 +90,20 @@ class ArmCollision:
             if tree is None:
                 continue
             near = tree.query_ball_point(R @ h.centre + t, h.radius + margin)
-            if not near:
-                continue
-            local = (points[near] - t) @ R  # world -> link frame
-            inside = local @ h.faces[:, :3].T + h.faces[:, 3] <= margin
-            if np.any(inside.all(axis=1)):
+            if near and h.inside(points[near], T, margin).any():
                 return h.name
         return None
 
-
-def on_arm(collision: ArmCollision, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
-    """Mask of the points (world) within `margin` of the arm at joints q: what a camera
-    sees of the robot itself, which is no obstacle."""
-    mask = np.zeros(len(points), bool)
-    poses = collision.kinematics.link_poses(q, [h.index for h in collision.hulls])
-    for h, T in zip(collision.hulls, poses, strict=True):
-        near = np.flatnonzero(
-            np.linalg.norm(points - (T[:3, :3] @ h.centre + T[:3, 3]), axis=1) <= h.radius + margin
-        )
-        local = (points[near] - T[:3, 3]) @ T[:3, :3]
-        mask[near[(local @ h.faces[:, :3].T + h.faces[:, 3] <= margin).all(axis=1)]] = True
-    return mask
+    def on_arm(self, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
+        """Mask of the points (world) within `margin` of the arm at joints q: what a camera
+        sees of the robot itself, which is no obstacle."""
+        mask = np.zeros(len(points), bool)
+        poses = self.kinematics.link_poses(q, [h.index for h in self.hulls])
+        for h, T in zip(self.hulls, poses, strict=True):
+            centre = T[:3, :3] @ h.centre + T[:3, 3]
+            near = np.flatnonzero(np.linalg.norm(points - centre, axis=1) <= h.radius + margin)
+            mask[near[h.inside(points[near], T, margin)]] = True
+        return mask
 
 
 def surface_points(geometry, count: int = 4000) -> np.ndarray:

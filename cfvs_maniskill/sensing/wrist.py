@@ -42,9 +42,11 @@ class WristSensing:
         in the world with the nominal mount, as a robot that trusts its calibration does."""
         self.generator.manual_seed(seed)
         self.seed, self.draws = seed, 0
-        self.place_cameras(sensors, stereo)
+        self.apply_episode_errors(sensors, stereo)
 
-    def place_cameras(self, sensors: dict, stereo: bool) -> None:
+    def apply_episode_errors(self, sensors: dict, stereo: bool) -> None:
+        """Draw the episode's sensor errors (from `seed`) and put the cameras on the
+        miscalibrated mount; a restored state calls this after `seek`."""
         self.model.start_episode(self.seed)
         mount = G.to_pose(self.model.mount)
         sensors[CAMERA_UID].camera.set_local_pose(camera_pose_in_tool() * mount)

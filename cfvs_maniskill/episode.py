@@ -114,6 +114,8 @@ def run_episode(
     obs, _ = env.reset(seed=seed, options=options or {})
     agent.reset(agent_seed(seed))
     executor.reset(obs)
+    if agent.privileged:  # the oracle's moves plan around the true object, not a view of it
+        executor.know(u.object_surface())
     executor.on_step = None if film is None else film.on_step
     if film is not None:
         film.start()

@@ -62,6 +62,15 @@ def test_agents_cannot_reach_the_env(make_env, name):
     assert specs and all(s.env_id == env_id for s in specs)
 
 
+def test_each_agent_gets_the_observations_its_class_asks_for():
+    assert agent_env_kwargs("oracle") == {"obs_mode": "state"}
+    assert agent_env_kwargs("kovis") == {"obs_mode": "rgbd", "stereo": True}
+    assert agent_env_kwargs("cfvs_no_map") == {"obs_mode": "pointcloud"}
+    assert agent_env_kwargs("tests.crashing_agent:CrashingAgent") == {"obs_mode": "state"}
+    with pytest.raises(KeyError, match="unknown agent 'nosuch'"):
+        agent_env_kwargs("nosuch")
+
+
 def test_only_the_oracle_is_privileged(make_env):
     env = make_env(ENV_ID, obs_mode="state")
     assert {"oracle"} == PRIVILEGED and make_agent("oracle", env).privileged

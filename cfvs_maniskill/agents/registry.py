@@ -71,9 +71,16 @@ AGENTS: dict[str, Callable[..., Agent]] = {
     "kovis": _kovis,
     "oracle": _oracle,
 }
-AGENT_ENV = {"oracle": {"obs_mode": "pointcloud"}, "kovis": {"obs_mode": "rgbd", "stereo": True}}
-"""The env options (gym.make keywords) a built-in agent needs; agents not listed here see
-the wrist point cloud (`{"obs_mode": "pointcloud"}`)."""
+BUILTIN_CLASSES = {
+    "cfvs": "cfvs_maniskill.agents.cfvs:CFVSAgent",
+    "icp": "cfvs_maniskill.agents.icp:ICPAgent",
+    "icp_kpts": "cfvs_maniskill.agents.icp:ICPAgent",
+    "3drhd": "cfvs_maniskill.agents.hole_detect:HoleDetectAgent",
+    "kovis": "cfvs_maniskill.agents.kovis:KOVISAgent",
+    "oracle": "cfvs_maniskill.agents.oracle:OracleAgent",
+}
+"""The class behind each built-in factory (CFVS's ablations and `cfvs@DIR` are CFVSAgent):
+its `obs_mode` and `env_options` say what the env must give it."""
 DEFAULT_AGENT = "cfvs"
 PRIVILEGED = {"oracle"}
 """Factories that take the env itself (they read the truth)."""
@@ -172,16 +179,13 @@ def resolve_agent(name: str) -> Callable[..., Agent]:
 
 
 def agent_env_kwargs(name: str) -> dict:
-    """The gym.make keywords the agent `name` needs: its ManiSkill obs mode and any other
-    env options (an Agent class's `obs_mode` and `env_options`)."""
-    if name in AGENT_ENV:
-        return dict(AGENT_ENV[name])
-    installed = installed_agents()
-    spec = installed.get(name) or (
-        name if ":" in name and not name.startswith(WEIGHTS_PREFIX) else None
-    )
+    """The gym.make keywords the agent `name` needs: its class's ManiSkill obs mode and any
+    other env options (`obs_mode`, `env_options`)."""
+    resolve_agent(name)  # an unknown name fails here, with the list of valid ones
+    spec = BUILTIN_CLASSES.get(name) or installed_agents().get(name)
     if spec is None:
-        return {"obs_mode": "pointcloud"}
+        builtin = name in ablation_names() or name.startswith(WEIGHTS_PREFIX)
+        spec = BUILTIN_CLASSES["cfvs"] if builtin else name
     cls = _user_agent(spec)
     return {"obs_mode": cls.obs_mode, **cls.env_options}
 

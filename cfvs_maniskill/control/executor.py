@@ -235,6 +235,12 @@ class Executor:
         if self.planner is not None:
             self._note(self.last_obs)
 
+    def know(self, points: np.ndarray) -> None:
+        """Obstacle points (world frame) the planner avoids this episode, besides what the
+        camera sees: a cell's CAD model of the fixture, or the oracle's true object."""
+        if self.planner is not None:
+            self.planner.know(points)
+
     def _note(self, obs) -> None:
         """Hand the planner an observation taken where the arm is now."""
         r = self.robot

@@ -84,6 +84,10 @@ class PathPlanner:
         if cloud is not None and "xyzw" in cloud:
             self._seen.append((cloud["xyzw"][0].cpu().numpy(), q.copy(), tcp.copy(), peg))
 
+    def know(self, world: np.ndarray) -> None:
+        """Obstacle points (world frame) known without looking: they join the known world."""
+        self.world.add_points(world)
+
     def forget(self) -> None:
         """A new episode: nothing is known but the table."""
         self.world.clear()

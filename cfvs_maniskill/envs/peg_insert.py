@@ -314,6 +314,12 @@ class PegInsertEnv(BaseEnv):
         T_obj = G.to_matrix(body_pose(self.hole_objects[i]))
         return T_obj @ G.make(np.eye(3), self.geometries[i].hole_frame)
 
+    def object_surface(self) -> np.ndarray:
+        """Ground truth (the oracle's planner, never agents): points on the active hole
+        object's surface, world frame, about 1 cm apart."""
+        T_obj = G.to_matrix(body_pose(self.hole_objects[self.object_index]))
+        return self._surfaces[self.object_index] @ T_obj[:3, :3].T + T_obj[:3, 3]
+
     def _show_only(self, idx: int) -> None:
         """Render object idx only. Parked objects are out of view, but the renderer would
         still draw them every frame, so they leave the render scene."""

@@ -82,10 +82,9 @@ def render(
             ok, _, reason = meta.read_text().partition(" ")
             videos.append(Video(rec, path, ok == "success", reason.strip()))
             continue
-        env_kwargs = agent_env_kwargs(rec["agent"])
         sensor = rec.get("sensor", "ideal")
-        key = (rec["task"], tuple(sorted(env_kwargs.items())), sensor)
         try:
+            key = (rec["task"], tuple(sorted(agent_env_kwargs(rec["agent"]).items())), sensor)
             if key not in envs:
                 envs[key] = make_env(
                     task_of_record(rec),
@@ -94,7 +93,7 @@ def render(
                     objects=sorted(objects[rec["task"]]),
                     assets=assets,
                 )
-        except ValueError as e:  # a task or profile file gone since, a bad file
+        except (KeyError, ValueError) as e:  # an agent, task or profile gone since, a bad file
             tqdm.write(f"{path.stem}: not rendered: {e}")
             videos.append(Video(rec, None, False, f"not rendered: {e}"))
             continue

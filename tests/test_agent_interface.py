@@ -159,7 +159,7 @@ def test_records_carry_the_true_residual_after_each_move(make_env, tmp_path):
     assert "| PegInsert6DoF | oracle | realistic | 1 | 1 | 3.0 / 3.0 | 2.0 / 2.0 |" in text
     # The realistic profile's hand-eye floor is quoted beside it (sensing/floor.py), the
     # ideal profile (no hand-eye error) has none.
-    assert "hand-eye floor" in text and "`realistic` 1.9" in text and "`ideal`" not in text
+    assert "hand-eye floor" in text and "`realistic` 2.86" in text and "`ideal`" not in text
     assert residuals.plot([rec], tmp_path, agent="oracle").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -15,6 +15,7 @@ from cfvs_maniskill import geometry as G
 from cfvs_maniskill.envs.options import check_options, depth_noise, start_distance
 from cfvs_maniskill.envs.scene import sample_object_pose, sample_start, score, solvable_start
 from cfvs_maniskill.envs.state import read_task_state, task_state, unflatten
+from cfvs_maniskill.envs.table import build_table
 from cfvs_maniskill.envs.task_config import TaskConfig, load_task
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
@@ -23,17 +24,11 @@ from cfvs_maniskill.rendering.views import aim_at_hole, human_camera_configs
 from cfvs_maniskill.robots.collision import ArmCollision, surface_points
 from cfvs_maniskill.robots.kinematics import ArmKinematics, body_pose
 from cfvs_maniskill.robots.poses import flange_pose, insertion_pose
-from cfvs_maniskill.robots.ur5 import (
-    CAMERA_FOV,
-    STEREO_UIDS,
-    TCP_LINK,
-    TOOL_LINK,
-    robot_uid_for,
-)
+from cfvs_maniskill.robots.ur5 import CAMERA_FOV, STEREO_UIDS, TCP_LINK, TOOL_LINK, robot_uid_for
 from cfvs_maniskill.sensing.model import SensorModel
 from cfvs_maniskill.sensing.profile import load_profile
 from cfvs_maniskill.sensing.wrench import contact_wrench
-from cfvs_maniskill.sensing.wrist import WristSensing
+from cfvs_maniskill.sensing.wrist import WristSensing, camera_geometry
 
 PARK = np.array([0.0, 5.0, -3.0])
 """Unused hole objects wait here, out of every camera's view."""
@@ -107,9 +102,9 @@ class PegInsertEnv(BaseEnv):
         """The sensor profile (`sensors/<name>.yaml`): depth camera, hand-eye, wrench."""
         self.depth_noise_std = depth_noise(cfg, self.sensor_profile, depth_noise_std)
         self.sensing = SensorModel(self.sensor_profile, self.depth_noise_std)
-        self.wrist = WristSensing(
-            self.sensing, self.depth_noise_std, cfg.camera_width, cfg.camera_height
-        )
+        self.camera_geometry = camera_geometry(cfg, self.sensor_profile)
+        """(width, height, vertical fov) of the wrist camera: the profile's field of view."""
+        self.wrist = WristSensing(self.sensing, self.depth_noise_std, *self.camera_geometry[:2])
         library = load_library(assets)
         self.object_specs = library.select(list(objects or cfg.objects), profile=cfg.peg)
         self.object_names = [s.name for s in self.object_specs]
@@ -184,18 +179,11 @@ class PegInsertEnv(BaseEnv):
 
     def _load_agent(self, options: dict):
         super()._load_agent(options, sapien.Pose())
-        self.agent.camera_width = self.task.camera_width
-        self.agent.camera_height = self.task.camera_height
+        a = self.agent
+        a.camera_width, a.camera_height, a.camera_fov = self.camera_geometry
 
     def _load_scene(self, options: dict):
-        b = self.scene.create_actor_builder()
-        b.add_box_collision(half_size=[1.0, 1.0, 0.025])
-        b.add_box_visual(
-            half_size=[1.0, 1.0, 0.025],
-            material=sapien.render.RenderMaterial(base_color=[0.82, 0.8, 0.76, 1.0]),
-        )
-        b.initial_pose = sapien.Pose(p=[0.3, 0, -0.025])
-        self.table = b.build_static(name="table")
+        self.table = build_table(self.scene)
         self.hole_objects = []
         for i, (spec, geom) in enumerate(zip(self.object_specs, self.geometries, strict=True)):
             visual, parts = geom.mesh_files()
@@ -211,6 +199,9 @@ class PegInsertEnv(BaseEnv):
         self.kinematics = ArmKinematics(self.agent.robot, TCP_LINK)
         self.collision = ArmCollision(self.agent.robot, self.kinematics)
         self._surfaces = [surface_points(g) for g in self.geometries]
+        self.wrist.learn_surfaces(
+            self.table, self.agent.robot, self.hole_objects, self.object_specs
+        )
 
     # ------------------------------------------------------------------ kinematics
     def tcp_matrix(self) -> np.ndarray:

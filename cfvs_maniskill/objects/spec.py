@@ -15,6 +15,9 @@ The contract (DESIGN.md):
       origin: [45.0, 0.0, 50.0]   #   centre of the opening, in the body's own frame
       axis: [0.0, 0.0, 1.0]       #   out of the part: the face's outward normal
     color: [0.6, 0.6, 0.65]
+    material: plain               # what a stereo camera sees of it: plain | machined | wood |
+                                  #   printed (sensing/surfaces.py; default plain)
+    texture: 0.01                 # or its texture contrast itself (0-1), overriding material
 
 `hole_frame` is for real parts whose global top is a boss or a curved surface: the hole may
 open on any planar face, at any angle. Its origin is in the mesh file's own coordinates and
@@ -38,6 +41,7 @@ from pydantic import Field
 
 from cfvs_maniskill.constants import PEG_PROFILES
 from cfvs_maniskill.errors import FileFieldError
+from cfvs_maniskill.sensing.surfaces import DEFAULT_PART_MATERIAL, MATERIALS, contrast_of
 from cfvs_maniskill.validation import STRICT, validate
 
 SPLITS = ("train", "test")
@@ -112,6 +116,8 @@ class HoleFile:
     hole_at: tuple[Coord, Coord] | None = None
     hole_frame: HoleFrameFile | None = None
     color: Annotated[tuple[Unit, ...], Field(min_length=3, max_length=4)] = (0.6, 0.6, 0.65)
+    material: str = DEFAULT_PART_MATERIAL
+    texture: Unit | None = None
 
 
 class HoleSpecError(FileFieldError):
@@ -134,6 +140,13 @@ class HoleSpec:
     hole_frame: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     """(origin, unit axis) of the hole's opening in the body's own frame, or None: the hole
     opens on the top face at hole_at."""
+    material: str = DEFAULT_PART_MATERIAL
+    texture: float | None = None
+    """Texture contrast for the stereo matcher (None: the material's; sensing/surfaces.py)."""
+
+    @property
+    def texture_contrast(self) -> float:
+        return contrast_of(self.material, self.texture)
 
     @property
     def mesh_file(self) -> Path | None:
@@ -191,6 +204,8 @@ def parse_spec(data: Any, file: Path, raw_text: str = "") -> HoleSpec:
                 "body.mesh.file",
                 f"mesh file not found: {(file.parent / params['file']).resolve()}",
             )
+    if f.material not in MATERIALS:
+        raise HoleSpecError(file, "material", f"one of {', '.join(MATERIALS)}, got {f.material!r}")
     name = file.stem if f.name is None else f.name
     if not _NAME_RE.match(name):
         raise HoleSpecError(
@@ -225,6 +240,8 @@ def parse_spec(data: Any, file: Path, raw_text: str = "") -> HoleSpec:
         source=file,
         raw_text=raw_text,
         hole_frame=hole_frame,
+        material=f.material,
+        texture=f.texture,
     )
 
 

@@ -46,7 +46,8 @@ def table(records: list[dict]) -> str:
     if notes:
         out.append(
             "\nThe hand-eye floor, p90 lateral / tilt: where a perfect estimator of the hole "
-            "ends when it trusts the nominal camera mount (`python -m "
+            "ends when it trusts the nominal camera mount and the depth camera's calibration "
+            "(`python -m "
             "cfvs_maniskill.sensing.floor`): " + ", ".join(notes) + "."
         )
     return "\n".join(out)

@@ -226,7 +226,9 @@ class _UR5Peg(BaseAgent):
     keyframes = dict(home=Keyframe(qpos=HOME_QPOS, pose=sapien.Pose()))
     camera_width = 128
     camera_height = 128
-    """Wrist-camera resolution; tasks set it from their file before the scene is built."""
+    camera_fov = float(CAMERA_FOV)
+    """Wrist-camera resolution and vertical field of view (rad); the env sets them from the
+    task file and the sensor profile before the scene is built."""
 
     @property
     def _sensor_configs(self):
@@ -236,7 +238,7 @@ class _UR5Peg(BaseAgent):
                 pose=camera_pose_in_tool(),
                 width=self.camera_width,
                 height=self.camera_height,
-                fov=CAMERA_FOV,
+                fov=self.camera_fov,
                 near=0.01,
                 far=2.0,
                 mount=self.robot.links_map[TOOL_LINK],

@@ -9,7 +9,13 @@ The servo ends where the *believed* hole sits at the pre-insertion pose D (in th
 frame: the opening PRE_INSERT_HEIGHT ahead of the tip, its axis against the tool's). A
 camera truly at C M (C the nominal mount in the tip frame, M the mount error, as the env
 applies it) sees the true hole H at (C M)^-1 H and places it at C (C M)^-1 H, so at the end
-the true hole is H = C M C^-1 D."""
+the true hole is H = C M C^-1 D.
+
+The depth camera's own calibration errors add to it (`depth_residuals`): a depth scale and
+offset move the hole along its ray (at the pre-insertion view the ray is oblique, so part
+of that is lateral), and focal and principal-point errors turn and stretch the rays. The
+perceived point is P(p); the servo ends where C P((C M)^-1 H) = D, so H = C M P^-1(C^-1 D).
+"""
 
 from __future__ import annotations
 
@@ -22,7 +28,7 @@ import tyro
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.robots.poses import flange_pose
 from cfvs_maniskill.sensing.model import mount_errors
-from cfvs_maniskill.sensing.profile import load_profile
+from cfvs_maniskill.sensing.profile import SensorProfile, load_profile
 
 
 def camera_in_tip() -> np.ndarray:
@@ -47,7 +53,48 @@ def hand_eye_residuals(mounts: np.ndarray) -> np.ndarray:
     true axis and the angle between the axes (what episode.pose_residual measures)."""
     C = camera_in_tip()
     # The exact inverse: SAPIEN's float32 pose is orthonormal to 1e-7 only (0.03 deg).
-    H = C @ mounts @ np.linalg.inv(C) @ pre_insertion_hole()
+    return _residuals(C @ mounts @ np.linalg.inv(C) @ pre_insertion_hole())
+
+
+_SAPIEN_TO_CV = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+"""A SAPIEN camera frame's (x forward, y left, z up) axes -> OpenCV's (x right, y down)."""
+
+
+def unperceive(p: np.ndarray, scale, offset, focal_ratio, principal, focal_px: float):
+    """(n, 3) points where the camera reports them (SAPIEN camera frame) -> where they
+    truly are: the inverse of depth z' = scale z + offset and ray x'/z' = (x/z) k + c / f
+    (k the true / reported focal ratio, c the principal-point offset in pixels)."""
+    q = p @ _SAPIEN_TO_CV.T
+    z = (q[:, 2] - offset) / scale
+    ray = (q[:, :2] / q[:, 2:3] - principal * focal_ratio[:, None] / focal_px) / focal_ratio[
+        :, None
+    ]
+    true = np.concatenate([ray * z[:, None], z[:, None]], axis=1)
+    return true @ _SAPIEN_TO_CV
+
+
+def depth_residuals(mounts: np.ndarray, depth: dict, focal_px: float) -> np.ndarray:
+    """hand_eye_residuals with the depth camera's errors too: `depth` holds (n,) arrays
+    scale, offset, focal_ratio and (n, 2) principal (sensor pixels)."""
+    C = camera_in_tip()
+    Cinv = np.linalg.inv(C)
+    D = pre_insertion_hole()
+    believed = Cinv @ D  # where the camera must see the hole, its frame
+    origin = np.repeat(believed[None, :3, 3], len(mounts), axis=0)
+    tip = origin + 0.01 * believed[:3, 2]  # a point 10 mm along the hole axis
+    args = (depth["scale"], depth["offset"], depth["focal_ratio"], depth["principal"], focal_px)
+    o, a = unperceive(origin, *args), unperceive(tip, *args)
+    H = np.repeat(believed[None], len(mounts), axis=0)
+    H[:, :3, 3] = o
+    z = (a - o) / np.linalg.norm(a - o, axis=1, keepdims=True)
+    # Keep the believed frame's x and y about the true axis (only the axis and origin count).
+    x = believed[:3, 0] - np.sum(believed[:3, 0] * z, axis=1, keepdims=True) * z
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    H[:, :3, 0], H[:, :3, 1], H[:, :3, 2] = x, np.cross(z, x), z
+    return _residuals(C @ mounts @ H)
+
+
+def _residuals(H: np.ndarray) -> np.ndarray:
     z, d = H[:, :3, 2], -H[:, :3, 3]
     lateral = np.linalg.norm(d - np.sum(d * z, axis=1, keepdims=True) * z, axis=1)
     tilt = np.degrees(np.arctan2(np.hypot(z[:, 0], z[:, 1]), -z[:, 2]))  # exact near 0
@@ -67,17 +114,37 @@ def floor_samples(translation: float, rotation_deg: float, n: int, seed: int) ->
     return hand_eye_residuals(mounts)
 
 
+def profile_floor_samples(profile: SensorProfile, n: int, seed: int) -> np.ndarray:
+    """(n, 2) residuals over a profile's hand-eye and depth-camera errors, drawn within its
+    bounds as the env draws them (uniform for the depth camera's)."""
+    he, d = profile.hand_eye, profile.depth
+    mounts = mount_errors(he.translation, he.rotation_deg, np.random.default_rng(seed), n)
+    u = np.random.default_rng([seed, 1]).uniform(-1.0, 1.0, (n, 5))
+    depth = dict(
+        scale=1.0 + d.depth_scale_error * u[:, 0],
+        offset=d.depth_offset_error * u[:, 1],
+        focal_ratio=1.0 / (1.0 + d.focal_error * u[:, 2]),
+        principal=d.principal_point_error_px * u[:, 3:5],
+    )
+    if d.model != "stereo":
+        return hand_eye_residuals(mounts)
+    return depth_residuals(mounts, depth, d.focal_px)
+
+
 @functools.cache
 def floor_p90(sensor: str, samples: int = 20000) -> tuple[float, float] | None:
-    """(lateral mm, tilt deg) p90 of a profile's hand-eye floor; None without a hand-eye
-    error or for a sensor name that is not a loadable profile (old records)."""
+    """(lateral mm, tilt deg) p90 of a profile's floor (hand-eye and depth-camera errors);
+    None without either or for a sensor name that is not a loadable profile (old
+    records)."""
     try:
-        he = load_profile(sensor).hand_eye
+        profile = load_profile(sensor)
     except (OSError, ValueError):
         return None
-    if he.translation == 0 and he.rotation_deg == 0:
+    he, d = profile.hand_eye, profile.depth
+    calibration = (d.depth_scale_error, d.depth_offset_error, d.focal_error)
+    if he.translation == 0 and he.rotation_deg == 0 and not any(calibration):
         return None
-    s = floor_samples(he.translation, he.rotation_deg, samples, seed=0)
+    s = profile_floor_samples(profile, samples, seed=0)
     return float(1000 * np.percentile(s[:, 0], 90)), float(np.percentile(s[:, 1], 90))
 
 
@@ -86,7 +153,9 @@ class FloorArgs:
     """Print the hand-eye floor of sensor profiles: the closed-loop residual a perfect
     estimator of the hole leaves when it trusts the nominal camera mount."""
 
-    sensors: list[str] = field(default_factory=lambda: ["realistic", "handeye_2mm_1deg"])
+    sensors: list[str] = field(
+        default_factory=lambda: ["realistic", "textured", "d435", "handeye_2mm_1deg"]
+    )
     """Profile names (sensors/*.yaml) or paths."""
     samples: int = 20000
     """Mount errors drawn per profile."""
@@ -95,16 +164,29 @@ class FloorArgs:
 
 
 def main(args: FloorArgs) -> None:
-    print("| profile | hand-eye error | lateral p50 / p90 | tilt p50 / p90 |")
-    print("|---|---|---|---|")
+    print(
+        "| profile | hand-eye error | depth scale / intrinsics error "
+        "| lateral p50 / p90 (hand-eye only) | tilt p50 / p90 |"
+    )
+    print("|---|---|---|---|---|")
     for name in args.sensors:
-        he = load_profile(name).hand_eye
-        s = floor_samples(he.translation, he.rotation_deg, args.samples, args.seed)
+        profile = load_profile(name)
+        he, d = profile.hand_eye, profile.depth
+        s = profile_floor_samples(profile, args.samples, args.seed)
+        h = floor_samples(he.translation, he.rotation_deg, args.samples, args.seed)
         lat = 1000 * np.percentile(s[:, 0], [50, 90])
+        lat_he = 1000 * np.percentile(h[:, 0], [50, 90])
         tilt = np.percentile(s[:, 1], [50, 90])
+        depth = "-"
+        if d.model == "stereo":
+            depth = (
+                f"+-{100 * d.depth_scale_error:g}% / +-{100 * d.focal_error:g}% f, "
+                f"+-{d.principal_point_error_px:g} px"
+            )
         print(
-            f"| `{name}` | {1000 * he.translation:g} mm / {he.rotation_deg:g} deg "
-            f"| {lat[0]:.2f} / {lat[1]:.2f} mm | {tilt[0]:.2f} / {tilt[1]:.2f} deg |"
+            f"| `{name}` | {1000 * he.translation:g} mm / {he.rotation_deg:g} deg | {depth} "
+            f"| {lat[0]:.2f} / {lat[1]:.2f} mm ({lat_he[0]:.2f} / {lat_he[1]:.2f}) "
+            f"| {tilt[0]:.2f} / {tilt[1]:.2f} deg |"
         )
 
 

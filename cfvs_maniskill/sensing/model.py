@@ -1,5 +1,5 @@
 """A sensor profile in action for one env: draws the per-episode errors (hand-eye, wrench
-bias) from the episode's seed and corrupts each observation with its own generator.
+bias, depth scale and offset, intrinsics, the depth noise's fixed pattern) from the episode's seed and corrupts each observation with its own generator.
 
 Every random draw is a function of (episode seed, what is drawn, which observation or
 control step), so a restored state reproduces the same sensor readings without replaying
@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.sensing.depth import apply_stereo
+from cfvs_maniskill.sensing.depth import EpisodeDepth, apply_stereo
 from cfvs_maniskill.sensing.profile import SensorProfile
 
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -21,7 +21,7 @@ SAPIEN_CAM_TO_GL = np.array(
 )
 """The OpenGL camera axes in a SAPIEN camera's frame (x forward, y left, z up)."""
 
-_HAND_EYE, _WRENCH_BIAS, _WRENCH_NOISE, _DEPTH = 1, 2, 3, 4
+_HAND_EYE, _WRENCH_BIAS, _WRENCH_NOISE, _DEPTH, _DEPTH_BIAS, _FIXED = 1, 2, 3, 4, 5, 6
 """Stream tags: each kind of draw has its own generator."""
 
 
@@ -54,6 +54,9 @@ class SensorModel:
         self.mount = np.eye(4)
         """The camera's true mount relative to the nominal one (SAPIEN camera frame)."""
         self.wrench_bias = np.zeros(6)
+        self.depth_errors = EpisodeDepth()
+        """The depth camera's errors for this episode (scale, offset, intrinsics, fixed
+        pattern)."""
 
     @property
     def is_iid(self) -> bool:
@@ -69,6 +72,31 @@ class SensorModel:
         scale = np.array([w.force_bias] * 3 + [w.torque_bias] * 3)
         self.wrench_bias = np.random.default_rng([self.seed, _WRENCH_BIAS]).standard_normal(6)
         self.wrench_bias *= scale
+        self.depth_errors = self._draw_depth_errors()
+
+    def _draw_depth_errors(self) -> EpisodeDepth:
+        """Scale, offset and intrinsics errors, uniform within the profile's bounds; the
+        fixed-pattern fields are drawn when the image size is first seen."""
+        d = self.profile.depth
+        u = np.random.default_rng([self.seed, _DEPTH_BIAS]).uniform(-1.0, 1.0, 5)
+        return EpisodeDepth(
+            scale=1.0 + d.depth_scale_error * u[0],
+            offset=d.depth_offset_error * u[1],
+            focal_ratio=1.0 / (1.0 + d.focal_error * u[2]),
+            principal_offset=(
+                d.principal_point_error_px * u[3],
+                d.principal_point_error_px * u[4],
+            ),
+        )
+
+    def _fixed_fields(self, shape: tuple[int, int]) -> EpisodeDepth:
+        """The episode's errors with fixed-pattern fields of this image size."""
+        e = self.depth_errors
+        if e.fixed_noise is None or e.fixed_noise.shape != shape:
+            rng = np.random.default_rng([self.seed, _FIXED, *shape])
+            e.fixed_noise = rng.standard_normal(shape, dtype=np.float32)
+            e.fixed_uniform = rng.random(shape, dtype=np.float32)
+        return e
 
     def wrench_error(self, step: int) -> np.ndarray:
         """Bias + noise of the wrench reading at control step `step` (one sample per step)."""
@@ -85,21 +113,49 @@ class SensorModel:
         g = SAPIEN_CAM_TO_GL
         return true_cam2world_gl @ G.inv(g) @ G.inv(self.mount) @ g
 
+    def reported_intrinsic(self, true_intrinsic: np.ndarray) -> np.ndarray:
+        """The rendered image's 3x3 camera matrix as the robot believes it: the episode's
+        focal and principal-point errors (sensor pixels, scaled to the render's)."""
+        e = self.depth_errors
+        K = np.array(true_intrinsic, dtype=np.float64)
+        if not e.intrinsics_off:
+            return K
+        to_render = K[0, 0] / self.profile.depth.focal_px
+        K[0, 0] /= e.focal_ratio
+        K[1, 1] /= e.focal_ratio
+        K[0, 2] -= e.principal_offset[0] * to_render
+        K[1, 2] -= e.principal_offset[1] * to_render
+        return K
+
     def depth_rng(self, draw: int) -> np.random.Generator:
         return np.random.default_rng([self.seed, _DEPTH, draw])
 
     def stereo_points_cv(
-        self, points: np.ndarray, valid: np.ndarray, draw: int, intrinsic: np.ndarray
+        self,
+        points: np.ndarray,
+        valid: np.ndarray,
+        draw: int,
+        intrinsic: np.ndarray,
+        surface: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """(H, W, 3) OpenCV camera-frame points -> the stereo sensor's (observation `draw`;
-        `intrinsic`: the rendered image's 3x3 camera matrix)."""
+        `intrinsic`: the rendered image's 3x3 camera matrix; `surface`: per-pixel albedo
+        and texture contrast)."""
         pixel_angle = 1.0 / float(intrinsic[0, 0])
-        return apply_stereo(points, valid, self.profile.depth, self.depth_rng(draw), pixel_angle)
+        episode = self._fixed_fields(points.shape[:2])
+        return apply_stereo(
+            points, valid, self.profile.depth, self.depth_rng(draw), pixel_angle, surface, episode
+        )
 
     def stereo_points_gl(
-        self, points_gl: np.ndarray, valid: np.ndarray, draw: int, intrinsic: np.ndarray
+        self,
+        points_gl: np.ndarray,
+        valid: np.ndarray,
+        draw: int,
+        intrinsic: np.ndarray,
+        surface: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """As stereo_points_cv, in OpenGL camera axes."""
         flip = np.array([1.0, -1.0, -1.0], dtype=np.float32)
-        out, ok = self.stereo_points_cv(points_gl * flip, valid, draw, intrinsic)
+        out, ok = self.stereo_points_cv(points_gl * flip, valid, draw, intrinsic, surface)
         return out * flip, ok

@@ -14,6 +14,7 @@ from pydantic import Field
 
 from cfvs_maniskill import resources
 from cfvs_maniskill.errors import FileFieldError
+from cfvs_maniskill.sensing.surfaces import MATERIALS
 from cfvs_maniskill.validation import STRICT, validate_file
 
 DEFAULT_SENSOR = "ideal"
@@ -72,6 +73,42 @@ class DepthModel:
     far side (a "flying pixel": the matching window straddles the edge)."""
     max_incidence_deg: _range(0.0, 90.0) = 90.0
     """No return where the surface is seen more obliquely than this (ray to normal)."""
+    occlusion: bool = False
+    """stereo: no return where the right imager (`baseline` along the image's x) cannot see
+    the point: the one-sided band beside every near edge that a stereo pair cannot match."""
+    imager_noise: _range(0.0, 1.0) = 0.0
+    """stereo: the imagers' noise, fraction of full scale. With it, matching follows each
+    surface's texture signal (albedo x texture contrast x cos incidence, plus the projector's
+    pattern): disparity noise and dropouts grow as that signal falls towards this noise
+    (`texture_*`). 0: every surface matches as a well-textured target."""
+    projector: _range(0.0, 1.0) = 0.0
+    """stereo: contrast of a projected pattern (active stereo), as a texture contrast that
+    every surface gets times its albedo; 0: passive stereo (no projector)."""
+    texture_noise_snr: _range(0.0, 100.0, open_low=True) = 0.74
+    """Texture signal-to-imager-noise ratio at which the disparity noise is sqrt(2) times
+    `disparity_noise_px`: noise = that * sqrt(1 + (texture_noise_snr / snr)^2)."""
+    texture_fill_snr: _range(0.0, 100.0, open_low=True) = 0.243
+    """Signal-to-noise ratio at which half the pixels match: fill = Phi(ln(snr /
+    texture_fill_snr) / texture_fill_spread), drawn once per episode and pixel."""
+    texture_fill_spread: _range(0.0, 10.0, open_low=True) = 0.44
+    """Spread of the fill's fall (log signal-to-noise)."""
+    fixed_pattern: Prob = 0.0
+    """Share of the disparity noise's variance that is fixed for the episode (the same at a
+    pixel in every observation); the rest is drawn anew per observation."""
+    depth_scale_error: _range(0.0, 0.5) = 0.0
+    """Per episode, the reported depth is (1 + s) times the true one, s uniform in +- this
+    (the absolute accuracy of an untared stereo camera)."""
+    depth_offset_error: _range(0.0, 0.1) = 0.0
+    """Per episode, an offset uniform in +- this (m) is added to every depth."""
+    focal_error: _range(0.0, 0.2) = 0.0
+    """Per episode, the reported focal length is off the true one by a factor uniform in
+    1 +- this: the cloud is formed with the reported one."""
+    principal_point_error_px: _range(0.0, 100.0) = 0.0
+    """Per episode, the reported principal point is off the true one by up to this many
+    sensor pixels per axis (uniform)."""
+    fov_deg: tuple[_range(1.0, 170.0), _range(1.0, 170.0)] | None = None
+    """The depth camera's field of view, horizontal x vertical degrees; the wrist camera is
+    rendered at the task's angular resolution over it. None: the task's 70 x 70 deg."""
 
 
 @dataclass(frozen=True)
@@ -117,6 +154,17 @@ class Imager:
 
 
 @dataclass(frozen=True)
+class Surfaces:
+    """What the scene's surfaces look like to the stereo matcher (sensing/surfaces.py)."""
+
+    __pydantic_config__ = STRICT
+
+    part_material: str | None = None
+    """Every hole object is made of this material (a name in sensing/surfaces.py), whatever
+    its file says; None: each object's own `material` / `texture`."""
+
+
+@dataclass(frozen=True)
 class SensorProfile:
     """A profile file's schema (validation.py) and the profile it gives."""
 
@@ -131,11 +179,12 @@ class SensorProfile:
     hand_eye: HandEye = field(default_factory=HandEye)
     wrench: Wrench = field(default_factory=Wrench)
     imager: Imager = field(default_factory=Imager)
+    surfaces: Surfaces = field(default_factory=Surfaces)
     source: str = ""
     """The file it was read from."""
 
 
-_SECTIONS = ("depth", "hand_eye", "wrench", "imager")
+_SECTIONS = ("depth", "hand_eye", "wrench", "imager", "surfaces")
 
 
 def _empty_sections_default(data: dict) -> dict:
@@ -154,6 +203,11 @@ def load_profile_file(path: Path) -> SensorProfile:
         raise SensorProfileError(path, "depth.min_range", "expected min_range < max_range")
     if d.edge_dropout + d.edge_flying > 1:
         raise SensorProfileError(path, "depth.edge_flying", "edge_dropout + edge_flying > 1")
+    material = profile.surfaces.part_material
+    if material is not None and material not in MATERIALS:
+        raise SensorProfileError(
+            path, "surfaces.part_material", f"one of {', '.join(MATERIALS)}, got {material!r}"
+        )
     return profile
 
 

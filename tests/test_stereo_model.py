@@ -227,3 +227,12 @@ def test_hole_files_name_their_material(tmp_path):
     with pytest.raises(HoleSpecError) as e:
         parse_spec({**base, "texture": 2.0}, f)
     assert "texture" in str(e.value)
+
+
+def test_the_docs_noise_table_is_what_the_code_gives():
+    from cfvs_maniskill.sensing.figures import DOC, MARK, table
+
+    doc = DOC.read_text()
+    assert f"<!-- {MARK} begin -->\n{table()}\n<!-- {MARK} end -->" in doc, (
+        "run `python -m cfvs_maniskill.sensing.figures` to rewrite docs/sensing.md"
+    )

@@ -46,7 +46,7 @@ def main(args: BenchArgs) -> int:
 
     add("Env step against ManiSkill", env_step.step_ratio())
     add("Point-cloud observation against a bare SAPIEN scene", env_step.pointcloud_floor())
-    add("Realistic sensor model against the ideal one", sensing.overhead())
+    add("Stereo sensor models against the ideal one", sensing.overhead())
     add("CFVS episode and networks", cfvs_speed.measure(cfvs_speed.Args(episodes=args.episodes)))
     add("Servo time", servo_time.measure(args.servo_episodes))
     add("Episode videos", video.measure())

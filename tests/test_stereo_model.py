@@ -230,9 +230,9 @@ def test_hole_files_name_their_material(tmp_path):
 
 
 def test_the_docs_noise_table_is_what_the_code_gives():
-    from cfvs_maniskill.sensing.figures import DOC, MARK, table
+    from cfvs_maniskill.report.sensing_figures import DOC, MARK, table
 
     doc = DOC.read_text()
-    assert f"<!-- {MARK} begin -->\n{table()}\n<!-- {MARK} end -->" in doc, (
-        "run `python -m cfvs_maniskill.sensing.figures` to rewrite docs/sensing.md"
+    assert f"<!-- report:{MARK} begin -->\n{table()}\n<!-- report:{MARK} end -->" in doc, (
+        "run `python -m cfvs_maniskill.report.sensing_figures` to rewrite docs/sensing.md"
     )

@@ -14,6 +14,7 @@ import torch
 import torch.nn.functional as F
 
 from cfvs_maniskill.robots.ur5 import STEREO_UIDS
+from cfvs_maniskill.sensing.surfaces import GREY
 
 IMAGE_SIZE = 96
 DEPTH_RANGE = (0.03, 0.5)
@@ -51,7 +52,7 @@ def stereo_images(obs: dict, side: int = IMAGE_SIZE) -> np.ndarray:
     out = []
     for uid in STEREO_UIDS:
         rgb = _check(uid, obs)["rgb"][0].cpu().numpy().astype(np.float32)
-        gray = rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+        gray = rgb @ GREY
         out.append(_resize(gray, side).round().clip(0, 255).astype(np.uint8))
     return np.stack(out)
 

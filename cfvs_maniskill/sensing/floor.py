@@ -27,7 +27,7 @@ import tyro
 
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.robots.poses import flange_pose
-from cfvs_maniskill.sensing.model import mount_errors
+from cfvs_maniskill.sensing.model import depth_errors, mount_errors
 from cfvs_maniskill.sensing.profile import SensorProfile, load_profile
 
 
@@ -119,16 +119,10 @@ def profile_floor_samples(profile: SensorProfile, n: int, seed: int) -> np.ndarr
     bounds as the env draws them (uniform for the depth camera's)."""
     he, d = profile.hand_eye, profile.depth
     mounts = mount_errors(he.translation, he.rotation_deg, np.random.default_rng(seed), n)
-    u = np.random.default_rng([seed, 1]).uniform(-1.0, 1.0, (n, 5))
-    depth = dict(
-        scale=1.0 + d.depth_scale_error * u[:, 0],
-        offset=d.depth_offset_error * u[:, 1],
-        focal_ratio=1.0 / (1.0 + d.focal_error * u[:, 2]),
-        principal=d.principal_point_error_px * u[:, 3:5],
-    )
     if d.model != "stereo":
         return hand_eye_residuals(mounts)
-    return depth_residuals(mounts, depth, d.focal_px)
+    u = np.random.default_rng([seed, 1]).uniform(-1.0, 1.0, (n, 5))
+    return depth_residuals(mounts, depth_errors(d, u), d.focal_px)
 
 
 @functools.cache
@@ -141,7 +135,12 @@ def floor_p90(sensor: str, samples: int = 20000) -> tuple[float, float] | None:
     except (OSError, ValueError):
         return None
     he, d = profile.hand_eye, profile.depth
-    calibration = (d.depth_scale_error, d.depth_offset_error, d.focal_error)
+    calibration = (
+        d.depth_scale_error,
+        d.depth_offset_error,
+        d.focal_error,
+        d.principal_point_error_px,
+    )
     if he.translation == 0 and he.rotation_deg == 0 and not any(calibration):
         return None
     s = profile_floor_samples(profile, samples, seed=0)

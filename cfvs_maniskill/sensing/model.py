@@ -1,5 +1,6 @@
 """A sensor profile in action for one env: draws the per-episode errors (hand-eye, wrench
-bias, depth scale and offset, intrinsics, the depth noise's fixed pattern) from the episode's seed and corrupts each observation with its own generator.
+bias, depth scale and offset, intrinsics, the depth noise's fixed pattern) from the
+episode's seed and corrupts each observation with its own generator.
 
 Every random draw is a function of (episode seed, what is drawn, which observation or
 control step), so a restored state reproduces the same sensor readings without replaying
@@ -12,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.sensing.depth import EpisodeDepth, apply_stereo
-from cfvs_maniskill.sensing.profile import SensorProfile
+from cfvs_maniskill.sensing.profile import DepthModel, SensorProfile
 
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 """OpenGL camera axes (x right, y up, z back) <-> OpenCV's (x right, y down, z forward)."""
@@ -37,6 +38,18 @@ def mount_errors(
     M[:, :3, :3] = Rotation.from_rotvec(np.radians(rotation_deg) * v[:, 0]).as_matrix()
     M[:, :3, 3] = translation * v[:, 1]
     return M
+
+
+def depth_errors(d: DepthModel, u: np.ndarray) -> dict[str, np.ndarray]:
+    """The depth camera's calibration errors for uniform draws `u` (..., 5) in [-1, 1]:
+    scale, offset, true / reported focal ratio and the principal-point offset (..., 2),
+    each within the profile's bound."""
+    return dict(
+        scale=1.0 + d.depth_scale_error * u[..., 0],
+        offset=d.depth_offset_error * u[..., 1],
+        focal_ratio=1.0 / (1.0 + d.focal_error * u[..., 2]),
+        principal=d.principal_point_error_px * u[..., 3:5],
+    )
 
 
 def mount_error(translation: float, rotation_deg: float, rng: np.random.Generator) -> np.ndarray:
@@ -77,16 +90,13 @@ class SensorModel:
     def _draw_depth_errors(self) -> EpisodeDepth:
         """Scale, offset and intrinsics errors, uniform within the profile's bounds; the
         fixed-pattern fields are drawn when the image size is first seen."""
-        d = self.profile.depth
         u = np.random.default_rng([self.seed, _DEPTH_BIAS]).uniform(-1.0, 1.0, 5)
+        e = depth_errors(self.profile.depth, u)
         return EpisodeDepth(
-            scale=1.0 + d.depth_scale_error * u[0],
-            offset=d.depth_offset_error * u[1],
-            focal_ratio=1.0 / (1.0 + d.focal_error * u[2]),
-            principal_offset=(
-                d.principal_point_error_px * u[3],
-                d.principal_point_error_px * u[4],
-            ),
+            scale=float(e["scale"]),
+            offset=float(e["offset"]),
+            focal_ratio=float(e["focal_ratio"]),
+            principal_offset=(float(e["principal"][0]), float(e["principal"][1])),
         )
 
     def _fixed_fields(self, shape: tuple[int, int]) -> EpisodeDepth:

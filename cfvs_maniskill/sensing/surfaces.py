@@ -37,6 +37,10 @@ ROBOT_MATERIAL = "plain"
 PEG_MATERIAL = "machined"
 
 
+GREY = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+"""Luma weights (ITU-R BT.601): an RGB colour's grey level."""
+
+
 def contrast_of(material: str, texture: float | None = None) -> float:
     """A surface's texture contrast: its own number, else its material's."""
     return float(texture) if texture is not None else MATERIALS[material]

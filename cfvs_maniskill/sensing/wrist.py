@@ -15,8 +15,6 @@ from cfvs_maniskill.sensing.depth import grid_points
 from cfvs_maniskill.sensing.model import GL_TO_CV, SensorModel
 from cfvs_maniskill.sensing.profile import SensorProfile
 
-GREY = np.array([0.299, 0.587, 0.114], dtype=np.float32)
-
 
 def camera_geometry(task, profile: SensorProfile) -> tuple[int, int, float]:
     """(width, height, vertical fov in rad) of the rendered wrist camera: the task's size
@@ -81,7 +79,7 @@ class WristSensing:
         rgb = rgb[0].cpu().numpy().reshape(h, w, 3).astype(np.float32) / 255.0
         ids = seg[0].cpu().numpy().reshape(h, w).astype(np.int64)
         ids = np.where(ids < len(self.contrast_lut), ids, 0)
-        return rgb @ GREY, self.contrast_lut[ids]
+        return rgb @ surfaces.GREY, self.contrast_lut[ids]
 
     def imager_pose(self, uid: str, mount: sapien.Pose | None = None) -> sapien.Pose:
         """A stereo imager in tool0: the wrist camera's pose (nominal, or on the episode's

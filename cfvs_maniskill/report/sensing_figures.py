@@ -2,7 +2,7 @@
 profile's depth noise and fill on a plate of each material, square-on, at 15 / 30 / 50 cm,
 measured by running the model (`apply_stereo`) on it, and its occlusion band beside a rim.
 
-    python -m cfvs_maniskill.sensing.figures          # rewrites the table in docs/sensing.md
+    python -m cfvs_maniskill.report.sensing_figures   # rewrites the table in docs/sensing.md
 """
 
 from __future__ import annotations
@@ -13,14 +13,17 @@ from pathlib import Path
 import numpy as np
 import tyro
 
+from cfvs_maniskill.report.tables import replace_marked
+from cfvs_maniskill.robots.ur5 import CAMERA_FOV
 from cfvs_maniskill.sensing import surfaces
 from cfvs_maniskill.sensing.depth import EpisodeDepth, apply_stereo, grid_points, occluded
 from cfvs_maniskill.sensing.profile import available_profiles, load_profile
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "sensing.md"
-MARK = "sensing:figures"
+MARK = "sensing"
+"""The table sits between `<!-- report:sensing begin/end -->` in DOC."""
 SIDE = 96
-FOCAL = 91.4
+FOCAL = 64 / float(np.tan(CAMERA_FOV / 2))
 """The wrist camera's render: focal length in pixels (128 px over 70 deg)."""
 ALBEDO = 0.6
 """A mid-grey part."""
@@ -83,14 +86,6 @@ def table() -> str:
     return "\n".join(rows)
 
 
-def replace_marked(text: str, body: str) -> str:
-    begin, end = f"<!-- {MARK} begin -->", f"<!-- {MARK} end -->"
-    if begin not in text or end not in text:
-        raise ValueError(f"{DOC}: no {begin} ... {end} markers")
-    head, rest = text.split(begin, 1)
-    return head + begin + "\n" + body + "\n" + end + rest.split(end, 1)[1]
-
-
 @dataclass
 class FiguresArgs:
     """Rewrite the stereo profiles' noise table in docs/sensing.md from the code."""
@@ -100,7 +95,7 @@ class FiguresArgs:
 
 
 def main(args: FiguresArgs) -> None:
-    args.doc.write_text(replace_marked(args.doc.read_text(), table()))
+    args.doc.write_text(replace_marked(args.doc.read_text(), MARK, table(), str(args.doc)))
     print(f"wrote the stereo profiles' figures into {args.doc}")
 
 

@@ -41,7 +41,10 @@ def run_ray(
         if address:
             ray.init(address=address, log_to_driver=False)
         else:
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+            # "local": a fresh instance even if an earlier cluster left its address behind.
+            ray.init(
+                address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False
+            )
     Remote = ray.remote(num_cpus=1)(_Actor)
 
     def spawn(i: int):

@@ -204,8 +204,8 @@ def test_ray_backend_retries_killed_workers_and_records_once(reference):
     )  # fmt: skip  (the same jobs as ARGS)
     objects = resolve(args)
     jobs = make_jobs(objects, list(args.agents), ["small"], args.episodes_per_object, 0)
-    # "local": the two-node test's cluster may have left its address behind (RAY_ADDRESS,
-    # /tmp/ray/ray_current_cluster), and Ray would try to join it.
+    # "local": Ray caches the GCS addresses it found in this process, so after the two-node
+    # test a bare ray.init() tries to join that dead cluster.
     ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         got = []

@@ -41,7 +41,7 @@ def run_ray(
         if address:
             ray.init(address=address, log_to_driver=False)
         else:
-            # "local": a fresh instance even if an earlier cluster left its address behind.
+            # "local": a fresh instance; without it Ray joins any GCS it has seen in this process.
             ray.init(
                 address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False
             )

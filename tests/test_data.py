@@ -151,7 +151,7 @@ def test_featured_procedural_bodies_put_a_block_or_notch_beside_the_hole(tmp_pat
     training object, the same files for the same seed."""
     monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
     shown = 0
-    folder, names, built = _mesh_bodies(6, 5, "round", features=True)
+    folder, names, built = _mesh_bodies(6, 5, "round", family="features")
     for spec, body in built:
         top, z = spec.hole_frame[0][2], body.vertices[:, 2]
         raised = z.max() > top + 0.005
@@ -163,7 +163,7 @@ def test_featured_procedural_bodies_put_a_block_or_notch_beside_the_hole(tmp_pat
     assert shown >= 4, f"only {shown} of 6 bodies have a block, a step or an inner corner"
     first = (folder / f"{names[0]}.yaml").read_text()
     monkeypatch.setenv("CFVS_CACHE", str(tmp_path / "again"))
-    folder2, _ = procedural_specs(6, 5, "round", 0.004, 0.045, features=True)
+    folder2, _ = procedural_specs(6, 5, "round", 0.004, 0.045, "features")
     assert (folder2 / f"{names[0]}.yaml").read_text() == first
 
 
@@ -177,7 +177,7 @@ def test_part_like_procedural_bodies_are_tall_with_inclined_faces_around_the_hol
 
     monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
     inclined = 0
-    for spec, body in _mesh_bodies(4, 7, "square", parts=True)[2]:
+    for spec, body in _mesh_bodies(4, 7, "square", family="parts")[2]:
         top = spec.hole_frame[0][2]
         assert PART_HEIGHT[0] <= top <= PART_HEIGHT[1] + 1e-6
         assert body.bounds[1, 2] == pytest.approx(top, abs=1e-6)  # nothing above the opening
@@ -185,12 +185,10 @@ def test_part_like_procedural_bodies_are_tall_with_inclined_faces_around_the_hol
         slanted = body.area_faces[(nz > 0.3) & (nz < 0.97)].sum()
         inclined += slanted > 1e-3  # at least 10 cm^2 of inclined face
     assert inclined >= 3, f"only {inclined} of 4 bodies have an inclined face"
-    with pytest.raises(ValueError, match="features and parts"):
-        procedural_specs(4, 7, "square", 0.004, 0.045, features=True, parts=True)
     both = CollectArgs(
         procedural=True, procedural_features=True, procedural_parts=True, out=tmp_path / "x.h5"
     )
-    with pytest.raises(DatasetError, match="--procedural-parts: expected one body family"):
+    with pytest.raises(DatasetError, match="--procedural-family: expected one body family"):
         collect(both)
     assert not (tmp_path / "x.h5").exists()
 
@@ -432,3 +430,28 @@ def test_kovis_rollout_step_range_is_kept_and_checked(tmp_path):
     with pytest.raises(DatasetError, match="--rollout-step"):
         collect(CollectArgs(task="PegInsert3DoF", kind="kovis", samples=4, out=out,
                             rollout_step=(0.05, 0.03)))  # fmt: skip
+
+
+def test_ribbed_pocketed_and_narrow_families_and_the_held_out_one(tmp_path, monkeypatch):
+    """The wider generator: ribs stand above the opening's face, pockets and counterbores
+    make the top concave, narrow bodies leave little more than the hole's walls; each body
+    is a valid, buildable training object. The held-out family never goes into training."""
+    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
+    from cfvs_maniskill.data.shapes import _keep
+
+    monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
+    keep = _keep("square", 0.004)
+    for spec, body in _mesh_bodies(3, 11, "square", family="ribs")[2]:
+        assert body.vertices[:, 2].max() > spec.hole_frame[0][2] + 0.004
+    for _spec, body in _mesh_bodies(3, 11, "square", family="pockets")[2]:
+        assert body.convex_hull.volume > body.volume + 1e-7  # a pocket, a bore or a recess
+    for _spec, body in _mesh_bodies(3, 11, "square", family="narrow")[2]:
+        extent = body.bounds[1] - body.bounds[0]
+        assert extent[:2].min() <= 2 * keep + 0.016 and extent[2] >= 0.08
+    assert "composite" not in TRAINING_FAMILIES
+    with pytest.raises(ValueError, match="held out of training"):
+        procedural_specs(2, 1, "square", 0.004, 0.045, "composite")
+    args = CollectArgs(procedural=True, procedural_family="composite", out=tmp_path / "c.h5")
+    with pytest.raises(DatasetError, match="--procedural-family: expected one of .*held out"):
+        collect(args)
+    assert not (tmp_path / "c.h5").exists()

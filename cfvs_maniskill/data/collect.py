@@ -32,7 +32,7 @@ from tqdm import tqdm
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.data import store
-from cfvs_maniskill.data.procedural import procedural_specs
+from cfvs_maniskill.data.procedural import FAMILIES, TRAINING_FAMILIES, procedural_specs
 from cfvs_maniskill.nets.kovis import KOVISConfig
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import (
@@ -90,6 +90,10 @@ class CollectArgs:
     procedural_parts: bool = False
     """With --procedural: tall bodies (10-26 cm) cut like machined parts, inclined planar
     faces falling away from the hole, a curved boss beside it (not with the features)."""
+    procedural_family: str = "plain"
+    """With --procedural: the body family, one of plain, features, parts, ribs, pockets,
+    narrow (data/procedural.py, data/shapes.py); --procedural-features and
+    --procedural-parts are the same as features and parts."""
     points: int = 1024
     """Points per sample after sampling (fixed N)."""
     seed: int = 0
@@ -123,10 +127,35 @@ def file_attrs(args: CollectArgs, task) -> dict:
     }
     if args.procedural and args.procedural_parts:
         attrs["procedural_parts"] = True  # only when set: older files still resume
+    if args.procedural and args.procedural_family != "plain":
+        attrs["procedural_family"] = args.procedural_family
     if args.kind == "kovis" and tuple(args.rollout_step) != ROLLOUT_STEP:
         # Only when not the default, so files collected before the option still resume.
         attrs["rollout_step"] = json.dumps(list(args.rollout_step))
     return attrs
+
+
+def family(args: CollectArgs) -> str:
+    """The procedural body family the flags name (DatasetError when they disagree)."""
+    named = [
+        f
+        for f, on in (("features", args.procedural_features), ("parts", args.procedural_parts))
+        if on
+    ]
+    if args.procedural_family != "plain":
+        named.append(args.procedural_family)
+    if len(set(named)) > 1:
+        raise store.DatasetError(
+            "--procedural-features / --procedural-parts / --procedural-family: expected one "
+            f"body family, got {named}"
+        )
+    chosen = named[0] if named else "plain"
+    if chosen not in TRAINING_FAMILIES:
+        raise store.DatasetError(
+            f"--procedural-family: expected one of {list(TRAINING_FAMILIES)}, got {chosen!r}"
+            + (" (held out of training)" if chosen in FAMILIES else "")
+        )
+    return chosen
 
 
 class Collector:
@@ -147,8 +176,7 @@ class Collector:
                 task.peg,
                 task.clearance,
                 task.hole_depth,
-                args.procedural_features,
-                args.procedural_parts,
+                family(args),
             )
             self.assets.append(str(folder))
             groups = [names[i : i + GROUP_SIZE] for i in range(0, len(names), GROUP_SIZE)]
@@ -383,10 +411,7 @@ def collect(args: CollectArgs) -> int:
     task = find_task(args.task)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    if args.procedural_features and args.procedural_parts:
-        raise store.DatasetError(
-            "--procedural-features / --procedural-parts: expected one body family, got both"
-        )
+    family(args)  # one body family, a training one
     if args.kind == "kovis" and not 0 < args.rollout_step[0] <= args.rollout_step[1] <= 0.1:
         raise store.DatasetError(
             f"--rollout-step: expected 0 < MIN <= MAX <= 0.1 m, got {args.rollout_step}"

@@ -6,6 +6,9 @@ that real parts have and the plain primitives never show the camera: a raised bl
 wall, a step, a boss) beside the hole, a notch cut out of the body (an edge or an inner
 corner close to the rim), and holes anywhere their walls allow, not only near the centre.
 
+`data/shapes.py` adds the families `ribs`, `pockets` (and counterbores), `narrow` and the
+held-out `composite`.
+
 The paper trains on four cuboids; here the networks can also see hundreds of distinct
 bodies. Each body is a normal `assets/holes`-style YAML file (split: train), so it goes
 through the same validation and geometry cache as every user file, and test objects are
@@ -22,6 +25,8 @@ import trimesh
 import yaml
 
 from cfvs_maniskill.constants import MIN_WALL, hole_half_extent
+from cfvs_maniskill.data import shapes
+from cfvs_maniskill.data.shapes import write_mesh_body
 from cfvs_maniskill.objects.build import build_geometry, cache_dir
 from cfvs_maniskill.objects.spec import HoleSpecError, parse_spec
 
@@ -127,18 +132,7 @@ def _featured_body(rng: np.random.Generator, peg: str, clearance: float, folder:
         mesh = trimesh.boolean.difference([mesh, *cuts], engine="manifold")
         if len(parts) == 1 and mesh.volume > base.volume - 1e-7:
             return None  # the notch missed the body: it would be a plain primitive
-    return _write_mesh_body(mesh, hole, top, folder, name)
-
-
-def _write_mesh_body(mesh: trimesh.Trimesh, hole: np.ndarray, top: float, folder: Path, name: str):
-    """Export a drawn body as `name`.stl: (its mesh spec entry, the hole frame of an opening
-    at `hole` (x, y) on the face at height `top`, axis up)."""
-    mesh.export(folder / f"{name}.stl")
-    frame = {
-        "origin": [round(float(hole[0]), 5), round(float(hole[1]), 5), round(top, 5)],
-        "axis": [0.0, 0.0, 1.0],
-    }
-    return {"mesh": {"file": f"{name}.stl"}}, frame
+    return write_mesh_body(mesh, hole, top, folder, name)
 
 
 PART_HEIGHT = (0.1, 0.26)
@@ -203,13 +197,22 @@ def _part_body(rng: np.random.Generator, peg: str, clearance: float, folder: Pat
         mesh = trimesh.boolean.union([mesh, boss], engine="manifold")
         floor = trimesh.creation.box([1.0, 1.0, 1.0], transform=_at(0, 0, -0.5))
         mesh = trimesh.boolean.difference([mesh, floor], engine="manifold")  # flat bottom
-    return _write_mesh_body(mesh, hole, h, folder, name)
+    return write_mesh_body(mesh, hole, h, folder, name)
 
 
-FAMILIES = {"plain": "", "features": "f", "parts": "p"}
+FAMILIES = {
+    "plain": "",
+    "features": "f",
+    "parts": "p",
+    "ribs": "r",
+    "pockets": "k",
+    "narrow": "n",
+    "composite": "c",
+}
 """Procedural body families and their file-name tags."""
-MESH_FAMILIES = {"features": _featured_body, "parts": _part_body}
+MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}
 """The families drawn as meshes, by the function that draws one (None: no body this draw)."""
+TRAINING_FAMILIES = tuple(f for f in FAMILIES if f not in shapes.HELD_OUT_FAMILIES)
 
 
 def procedural_specs(
@@ -218,19 +221,23 @@ def procedural_specs(
     peg: str,
     clearance: float,
     depth: float,
-    features: bool = False,
-    parts: bool = False,
+    family: str = "plain",
+    split: str = "train",
+    folder: Path | None = None,
 ) -> tuple[Path, list[str]]:
-    """Write (once) `count` valid training bodies for `peg`; return their folder and names.
-    `features`: mesh bodies with a raised block and / or a notch beside the hole. `parts`:
-    tall bodies with inclined planar cuts and a curved boss around the hole (`_part_body`)."""
-    if features and parts:
-        raise ValueError("procedural bodies: choose one of features and parts, not both")
-    family = "parts" if parts else "features" if features else "plain"
+    """Write (once) `count` valid bodies of `family` for `peg`; return their folder and
+    names. Training bodies (split train) come from `TRAINING_FAMILIES` only; the held-out
+    family is written with split test, for the frozen generalisation set."""
+    if family not in FAMILIES:
+        raise ValueError(f"procedural family: expected one of {list(FAMILIES)}, got {family!r}")
+    if split == "train" and family not in TRAINING_FAMILIES:
+        raise ValueError(
+            f"procedural family {family!r} is held out of training (the generalisation set's)"
+        )
     tag = f"-{family}" if family != "plain" else ""
-    folder = (
-        cache_dir().parent / "procedural" / f"{peg}-c{clearance:g}-d{depth:g}-s{seed}-n{count}{tag}"
-    )
+    if folder is None:
+        name = f"{peg}-c{clearance:g}-d{depth:g}-s{seed}-n{count}{tag}"
+        folder = cache_dir().parent / "procedural" / name
     names = [f"proc{FAMILIES[family]}_{seed}_{i:04d}" for i in range(count)]
     if all((folder / f"{n}.yaml").is_file() for n in names):
         return folder, names
@@ -254,7 +261,7 @@ def procedural_specs(
             grey = float(rng.uniform(0.35, 0.8))
             tint = rng.uniform(-0.08, 0.08, size=3)
             doc = {
-                "split": "train",
+                "split": split,
                 "hole": [peg],
                 "body": body,
                 **where,
@@ -266,7 +273,8 @@ def procedural_specs(
             except HoleSpecError:
                 continue  # too small for the hole: draw another body
             tmp = path.with_suffix(".tmp")
-            tmp.write_text(f"# procedural training body (seed {seed})\n" + yaml.safe_dump(doc))
+            head = "training body" if split == "train" else f"{family} body, split {split}"
+            tmp.write_text(f"# procedural {head} (seed {seed})\n" + yaml.safe_dump(doc))
             os.replace(tmp, path)
             break
         else:

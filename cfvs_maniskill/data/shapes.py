@@ -1,0 +1,221 @@
+"""More procedural body families: the details real parts put around an opening.
+
+Each family draws one mesh body with a hole frame, like `procedural._featured_body`:
+- `ribs`: thin parallel ribs (2-5 mm) standing on the face beside the hole;
+- `pockets`: blind pockets, smaller openings that do not fit the peg, and a counterbore
+  (the opening at the floor of a wide shallow recess) around the hole;
+- `narrow`: narrow, tall bodies, the hole near an end or an inner corner;
+- `composite`: an L-, T- or U-shaped outline carrying two or three of the elements above
+  plus a boss around the opening. Training never draws it (`TRAINING_FAMILIES`): the
+  frozen generalisation set (`assets/generalisation/`) is made of it.
+
+Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
+radius plus `MIN_WALL`) away from the hole's axis.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from cfvs_maniskill.constants import MIN_WALL, hole_half_extent
+
+Draw = Callable[[np.random.Generator, str, float, Path, str], "tuple[dict, dict] | None"]
+
+
+def _box(size, centre, yaw: float = 0.0) -> trimesh.Trimesh:
+    box = trimesh.creation.box(size)
+    box.apply_transform(trimesh.transformations.rotation_matrix(yaw, [0, 0, 1]))
+    box.apply_translation(centre)
+    return box
+
+
+def _union(meshes: list[trimesh.Trimesh]) -> trimesh.Trimesh:
+    return trimesh.boolean.union(meshes, engine="manifold") if len(meshes) > 1 else meshes[0]
+
+
+def _minus(mesh: trimesh.Trimesh, cuts: list[trimesh.Trimesh]) -> trimesh.Trimesh:
+    return trimesh.boolean.difference([mesh, *cuts], engine="manifold") if cuts else mesh
+
+
+def _keep(peg: str, clearance: float) -> float:
+    """Distance from the hole's axis that every element keeps clear."""
+    return hole_half_extent(peg, clearance) * np.sqrt(2) + MIN_WALL
+
+
+def _unit(angle: float) -> np.ndarray:
+    return np.array([np.cos(angle), np.sin(angle)])
+
+
+def add_ribs(rng, mesh, hole, top, keep):
+    """One to four thin parallel ribs beside the hole, 5-40 mm tall."""
+    side = rng.uniform(0, 2 * np.pi)
+    u = _unit(side)
+    gap = keep + rng.uniform(0.004, 0.03)
+    pitch = rng.uniform(0.008, 0.025)
+    height, thick = rng.uniform(0.005, 0.04), rng.uniform(0.002, 0.005)
+    length = rng.uniform(0.03, 0.15)
+    ribs = []
+    for k in range(int(rng.integers(1, 5))):
+        c = hole + u * (gap + k * pitch)
+        ribs.append(_box([thick, length, height + 0.002], [*c, top + height / 2 - 0.001], side))
+    return _union([mesh, *ribs]), top
+
+
+def add_pockets(rng, mesh, hole, top, keep):
+    """One to three blind pockets (square or round) and small drilled openings, none wide
+    enough for the peg, beside the hole."""
+    cuts = []
+    for _ in range(int(rng.integers(1, 4))):
+        u = _unit(rng.uniform(0, 2 * np.pi))
+        if rng.random() < 0.5:  # a drilled opening, narrower than any peg
+            r = rng.uniform(0.002, 0.012)
+            c = hole + u * (keep + MIN_WALL + r + rng.uniform(0.0, 0.03))
+            d = rng.uniform(0.01, 0.03)
+            cut = trimesh.creation.cylinder(r, 2 * d, 32)
+            cut.apply_translation([*c, top])
+        else:  # a pocket
+            w, length = rng.uniform(0.006, 0.025), rng.uniform(0.01, 0.05)
+            c = hole + u * (keep + MIN_WALL + max(w, length) / 2 + rng.uniform(0.0, 0.03))
+            d = rng.uniform(0.003, 0.02)
+            cut = _box([w, length, 2 * d], [*c, top], rng.uniform(0, np.pi))
+        cuts.append(cut)
+    return _minus(mesh, cuts), top
+
+
+def add_counterbore(rng, mesh, hole, top, keep):
+    """The opening at the floor of a round or square recess 3-12 mm deep."""
+    d = rng.uniform(0.003, 0.012)
+    r = keep + rng.uniform(0.004, 0.015)
+    if rng.random() < 0.5:
+        cut = trimesh.creation.cylinder(r, 2 * d, 64)
+        cut.apply_translation([*hole, top])
+    else:
+        cut = _box([2 * r, 2 * r, 2 * d], [*hole, top], rng.uniform(0, np.pi / 2))
+    return _minus(mesh, [cut]), top - d
+
+
+def add_boss(rng, mesh, hole, top, keep):
+    """A round boss around the opening, 4-20 mm above the face: the opening on its top."""
+    h = rng.uniform(0.004, 0.02)
+    r = keep + rng.uniform(0.002, 0.012)
+    boss = trimesh.creation.cylinder(r, h + 0.002, 64)
+    boss.apply_translation([*hole, top + h / 2 - 0.001])
+    return _union([mesh, boss]), top + h
+
+
+def add_step(rng, mesh, hole, top, keep):
+    """A step down (or to the table) next to the hole: an edge or an inner corner."""
+    side = rng.uniform(0, 2 * np.pi)
+    size = 0.3
+    c = hole + _unit(side) * (keep + rng.uniform(0.002, 0.03) + size / 2)
+    floor = -0.01 if rng.random() < 0.4 else top * rng.uniform(0.3, 0.85)
+    notch = _box([size, size, 1.0], [*c, floor + 0.5], side + rng.uniform(-0.8, 0.8))
+    return _minus(mesh, [notch]), top
+
+
+def _slab(rng, keep: float, height: float) -> tuple[trimesh.Trimesh, np.ndarray]:
+    """A box with room for the hole: (mesh, hole x y)."""
+    sx, sy = rng.uniform(2 * keep + 0.01, 0.2, size=2)
+    room = np.array([sx, sy]) / 2 - keep
+    hole = rng.uniform(-1, 1, size=2) * room
+    return _box([sx, sy, height], [0, 0, height / 2]), hole
+
+
+def write_mesh_body(mesh: trimesh.Trimesh, hole: np.ndarray, top: float, folder: Path, name: str):
+    """Export a drawn body as `name`.stl: (its mesh spec entry, the hole frame of an opening
+    at `hole` (x, y) on the face at height `top`, axis up)."""
+    mesh.export(folder / f"{name}.stl")
+    frame = {
+        "origin": [round(float(hole[0]), 5), round(float(hole[1]), 5), round(float(top), 5)],
+        "axis": [0.0, 0.0, 1.0],
+    }
+    return {"mesh": {"file": f"{name}.stl"}}, frame
+
+
+def _write(rng, mesh, hole, top, folder, name):
+    if not mesh.is_watertight or mesh.volume <= 0:
+        return None  # a boolean that failed: draw again
+    return write_mesh_body(mesh, hole, top, folder, name)
+
+
+def ribbed_body(rng, peg, clearance, folder: Path, name: str):
+    keep = _keep(peg, clearance)
+    top = rng.uniform(0.05, 0.14)
+    mesh, hole = _slab(rng, keep, top)
+    for _ in range(int(rng.integers(1, 3))):
+        mesh, top = add_ribs(rng, mesh, hole, top, keep)
+    return _write(rng, mesh, hole, top, folder, name)
+
+
+def pocketed_body(rng, peg, clearance, folder: Path, name: str):
+    keep = _keep(peg, clearance)
+    top = rng.uniform(0.05, 0.14)
+    mesh, hole = _slab(rng, keep, top)
+    mesh, top = add_pockets(rng, mesh, hole, top, keep)
+    if rng.random() < 0.6:
+        mesh, top = add_counterbore(rng, mesh, hole, top, keep)
+    return _write(rng, mesh, hole, top, folder, name)
+
+
+def narrow_body(rng, peg, clearance, folder: Path, name: str):
+    """A bar just wider than the hole's wall, 8-26 cm tall, the hole anywhere along it."""
+    keep = _keep(peg, clearance)
+    top = rng.uniform(0.08, 0.26)
+    width = 2 * keep + rng.uniform(0.0, 0.015)
+    length = rng.uniform(max(2 * keep + 0.005, 0.09), 0.22)
+    mesh = _box([length, width, top], [0, 0, top / 2], 0.0)
+    hole = np.array(
+        [rng.uniform(-1, 1) * (length / 2 - keep), rng.uniform(-1, 1) * (width / 2 - keep)]
+    )
+    if rng.random() < 0.5:
+        mesh, top = add_step(rng, mesh, hole, top, keep)
+    return _write(rng, mesh, hole, top, folder, name)
+
+
+ELEMENTS = (add_ribs, add_pockets, add_counterbore, add_step)
+
+
+def composite_body(rng, peg, clearance, folder: Path, name: str):
+    """An L, T or U outline (boxes), the hole near an inner corner or an end, with two or
+    three elements and a boss around the opening half the time."""
+    keep = _keep(peg, clearance)
+    top = rng.uniform(0.05, 0.2)
+    arm = rng.uniform(2 * keep + 0.004, 2 * keep + 0.04)  # width of each arm
+    span = rng.uniform(0.12, 0.24)
+    shape = rng.choice(["L", "T", "U"])
+    parts = [_box([span, arm, top], [0, -span / 2 + arm / 2, top / 2])]  # the base arm
+    if shape in ("L", "U"):
+        parts.append(_box([arm, span, top], [-span / 2 + arm / 2, 0, top / 2]))
+    if shape == "U":
+        parts.append(_box([arm, span, top], [span / 2 - arm / 2, 0, top / 2]))
+    if shape == "T":
+        parts.append(_box([arm, span, top], [0, 0, top / 2]))
+    mesh = _union(parts)
+    # The hole on an arm: its inner corner or its far end, within the arm's walls.
+    corner = rng.random() < 0.5
+    if shape == "T":
+        y = -span / 2 + arm / 2 if corner else span / 2 - keep - 0.002
+        hole = np.array([0.0 if not corner else rng.uniform(-1, 1) * (span / 2 - keep), y])
+    else:
+        x = -span / 2 + arm / 2
+        hole = np.array([x, -span / 2 + arm / 2 if corner else span / 2 - keep - 0.002])
+    hole = hole + rng.uniform(-1, 1, size=2) * max(0.0, arm / 2 - keep)
+    for add in rng.choice(ELEMENTS, size=int(rng.integers(2, 4)), replace=False):
+        mesh, top = add(rng, mesh, hole, top, keep)
+    if rng.random() < 0.5:
+        mesh, top = add_boss(rng, mesh, hole, top, keep)
+    return _write(rng, mesh, hole, top, folder, name)
+
+
+FAMILIES: dict[str, Draw] = {
+    "ribs": ribbed_body,
+    "pockets": pocketed_body,
+    "narrow": narrow_body,
+    "composite": composite_body,
+}
+HELD_OUT_FAMILIES = ("composite",)
+"""Never drawn for training: the generalisation set's family."""

@@ -117,7 +117,7 @@ def file_attrs(args: CollectArgs, task) -> dict:
         "seed": args.seed,
         "objects": json.dumps(list(args.objects)),
         "procedural": args.procedural_count if args.procedural else 0,
-        "procedural_features": bool(args.procedural and args.procedural_features),
+        "procedural_features": bool(args.procedural and family(args) == "features"),
         "frame": "tool",
         "units": "metres, radians",
         "keypoint_spacing": L.KEYPOINT_SPACING,
@@ -125,10 +125,11 @@ def file_attrs(args: CollectArgs, task) -> dict:
         "config": json.dumps({k: str(v) for k, v in dataclasses.asdict(args).items()}),
         "task_config": json.dumps(dataclasses.asdict(task)),
     }
-    if args.procedural and args.procedural_parts:
-        attrs["procedural_parts"] = True  # only when set: older files still resume
-    if args.procedural and args.procedural_family != "plain":
-        attrs["procedural_family"] = args.procedural_family
+    # Only when set, so older files still resume; one family however the flags named it.
+    if args.procedural and family(args) == "parts":
+        attrs["procedural_parts"] = True
+    if args.procedural and family(args) not in ("plain", "features", "parts"):
+        attrs["procedural_family"] = family(args)
     if args.kind == "kovis" and tuple(args.rollout_step) != ROLLOUT_STEP:
         # Only when not the default, so files collected before the option still resume.
         attrs["rollout_step"] = json.dumps(list(args.rollout_step))

@@ -136,7 +136,7 @@ def write_mesh_body(mesh: trimesh.Trimesh, hole: np.ndarray, top: float, folder:
     return {"mesh": {"file": f"{name}.stl"}}, frame
 
 
-def _write(rng, mesh, hole, top, folder, name):
+def _write(mesh, hole, top, folder, name):
     if not mesh.is_watertight or mesh.volume <= 0:
         return None  # a boolean that failed: draw again
     return write_mesh_body(mesh, hole, top, folder, name)
@@ -148,7 +148,7 @@ def ribbed_body(rng, peg, clearance, folder: Path, name: str):
     mesh, hole = _slab(rng, keep, top)
     for _ in range(int(rng.integers(1, 3))):
         mesh, top = add_ribs(rng, mesh, hole, top, keep)
-    return _write(rng, mesh, hole, top, folder, name)
+    return _write(mesh, hole, top, folder, name)
 
 
 def pocketed_body(rng, peg, clearance, folder: Path, name: str):
@@ -158,7 +158,7 @@ def pocketed_body(rng, peg, clearance, folder: Path, name: str):
     mesh, top = add_pockets(rng, mesh, hole, top, keep)
     if rng.random() < 0.6:
         mesh, top = add_counterbore(rng, mesh, hole, top, keep)
-    return _write(rng, mesh, hole, top, folder, name)
+    return _write(mesh, hole, top, folder, name)
 
 
 def narrow_body(rng, peg, clearance, folder: Path, name: str):
@@ -173,7 +173,7 @@ def narrow_body(rng, peg, clearance, folder: Path, name: str):
     )
     if rng.random() < 0.5:
         mesh, top = add_step(rng, mesh, hole, top, keep)
-    return _write(rng, mesh, hole, top, folder, name)
+    return _write(mesh, hole, top, folder, name)
 
 
 ELEMENTS = (add_ribs, add_pockets, add_counterbore, add_step)
@@ -208,7 +208,7 @@ def composite_body(rng, peg, clearance, folder: Path, name: str):
         mesh, top = add(rng, mesh, hole, top, keep)
     if rng.random() < 0.5:
         mesh, top = add_boss(rng, mesh, hole, top, keep)
-    return _write(rng, mesh, hole, top, folder, name)
+    return _write(mesh, hole, top, folder, name)
 
 
 FAMILIES: dict[str, Draw] = {

@@ -437,10 +437,10 @@ def test_ribbed_pocketed_and_narrow_families_and_the_held_out_one(tmp_path, monk
     make the top concave, narrow bodies leave little more than the hole's walls; each body
     is a valid, buildable training object. The held-out family never goes into training."""
     from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
-    from cfvs_maniskill.data.shapes import _keep
+    from cfvs_maniskill.data.shapes import keep_clear
 
     monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
-    keep = _keep("square", 0.004)
+    keep = keep_clear("square", 0.004)
     for spec, body in _mesh_bodies(3, 11, "square", family="ribs")[2]:
         assert body.vertices[:, 2].max() > spec.hole_frame[0][2] + 0.004
     for _spec, body in _mesh_bodies(3, 11, "square", family="pockets")[2]:

@@ -32,7 +32,7 @@ from tqdm import tqdm
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.data import store
-from cfvs_maniskill.data.procedural import FAMILIES, TRAINING_FAMILIES, procedural_specs
+from cfvs_maniskill.data.procedural import check_family, procedural_specs
 from cfvs_maniskill.nets.kovis import KOVISConfig
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import (
@@ -108,6 +108,7 @@ class CollectArgs:
 
 
 def file_attrs(args: CollectArgs, task) -> dict:
+    drawn = family(args) if args.procedural else "plain"
     attrs = {
         "format": store.FORMAT,
         "kind": args.kind,
@@ -117,7 +118,7 @@ def file_attrs(args: CollectArgs, task) -> dict:
         "seed": args.seed,
         "objects": json.dumps(list(args.objects)),
         "procedural": args.procedural_count if args.procedural else 0,
-        "procedural_features": bool(args.procedural and family(args) == "features"),
+        "procedural_features": drawn == "features",
         "frame": "tool",
         "units": "metres, radians",
         "keypoint_spacing": L.KEYPOINT_SPACING,
@@ -126,10 +127,10 @@ def file_attrs(args: CollectArgs, task) -> dict:
         "task_config": json.dumps(dataclasses.asdict(task)),
     }
     # Only when set, so older files still resume; one family however the flags named it.
-    if args.procedural and family(args) == "parts":
+    if drawn == "parts":
         attrs["procedural_parts"] = True
-    if args.procedural and family(args) not in ("plain", "features", "parts"):
-        attrs["procedural_family"] = family(args)
+    if drawn not in ("plain", "features", "parts"):
+        attrs["procedural_family"] = drawn
     if args.kind == "kovis" and tuple(args.rollout_step) != ROLLOUT_STEP:
         # Only when not the default, so files collected before the option still resume.
         attrs["rollout_step"] = json.dumps(list(args.rollout_step))
@@ -151,11 +152,10 @@ def family(args: CollectArgs) -> str:
             f"body family, got {named}"
         )
     chosen = named[0] if named else "plain"
-    if chosen not in TRAINING_FAMILIES:
-        raise store.DatasetError(
-            f"--procedural-family: expected one of {list(TRAINING_FAMILIES)}, got {chosen!r}"
-            + (" (held out of training)" if chosen in FAMILIES else "")
-        )
+    try:
+        check_family(chosen)
+    except ValueError as e:
+        raise store.DatasetError(f"--procedural-family: {e}") from None
     return chosen
 
 

@@ -26,7 +26,7 @@ import yaml
 
 from cfvs_maniskill.constants import MIN_WALL, hole_half_extent
 from cfvs_maniskill.data import shapes
-from cfvs_maniskill.data.shapes import write_mesh_body
+from cfvs_maniskill.data.shapes import box_at, keep_clear, write_mesh_body
 from cfvs_maniskill.objects.build import build_geometry, cache_dir
 from cfvs_maniskill.objects.spec import HoleSpecError, parse_spec
 
@@ -109,23 +109,17 @@ def _featured_body(rng: np.random.Generator, peg: str, clearance: float, folder:
         depth, length = rng.uniform(0.01, 0.06), rng.uniform(0.02, 0.16)
         h = rng.uniform(*FEATURE_HEIGHT)
         c = hole + u * (half * np.sqrt(2) + gap + depth / 2)
-        block = trimesh.creation.box([depth, length, h + 0.002])
-        block.apply_transform(trimesh.transformations.rotation_matrix(side, [0, 0, 1]))
-        block.apply_translation([c[0], c[1], top + h / 2 - 0.001])
-        parts.append(block)
+        parts.append(box_at([depth, length, h + 0.002], [c[0], c[1], top + h / 2 - 0.001], side))
     if kinds in ("notch", "both"):
         u = -u if kinds == "both" else u  # the other side of the hole
         gap = rng.uniform(*FEATURE_GAP) + MIN_WALL
         size = 0.3
         c = hole + u * (half * np.sqrt(2) + gap + size / 2)
         # Turned a little off the direction: an inner corner, not only a straight edge.
-        notch = trimesh.creation.box([size, size, 1.0])
-        notch.apply_transform(
-            trimesh.transformations.rotation_matrix(side + rng.uniform(-0.8, 0.8), [0, 0, 1])
-        )
+        yaw = side + rng.uniform(-0.8, 0.8)
         # Down to the table half the time (an L-shaped body), else a step down.
         floor = -0.01 if rng.random() < 0.5 else top * rng.uniform(0.2, 0.85)
-        notch.apply_translation([c[0], c[1], floor + 0.5])
+        notch = box_at([size, size, 1.0], [c[0], c[1], floor + 0.5], yaw)
         cuts.append(notch)
     mesh = trimesh.boolean.union(parts, engine="manifold") if len(parts) > 1 else base
     if cuts:
@@ -155,8 +149,7 @@ def _part_body(rng: np.random.Generator, peg: str, clearance: float, folder: Pat
     else:
         base_body[key]["height"] = h
     base = _primitive_mesh(base_body)
-    half = hole_half_extent(peg, clearance)
-    keep = half * np.sqrt(2) + MIN_WALL  # the opening's corner plus a wall
+    keep = keep_clear(peg, clearance)  # the opening's corner plus a wall
     room = max(0.0, _inner_radius(base_body) - keep)
     hole = rng.uniform(-1, 1, size=2) * room * 0.8 / np.sqrt(2)
     mesh = base
@@ -215,6 +208,14 @@ MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMIL
 TRAINING_FAMILIES = tuple(f for f in FAMILIES if f not in shapes.HELD_OUT_FAMILIES)
 
 
+def check_family(family: str, split: str = "train") -> None:
+    """ValueError unless `family` may be drawn for `split` (training: not a held-out one)."""
+    allowed = TRAINING_FAMILIES if split == "train" else tuple(FAMILIES)
+    if family not in allowed:
+        held = " (held out of training: the generalisation set's)" if family in FAMILIES else ""
+        raise ValueError(f"expected one of {list(allowed)}, got {family!r}{held}")
+
+
 def procedural_specs(
     count: int,
     seed: int,
@@ -228,12 +229,10 @@ def procedural_specs(
     """Write (once) `count` valid bodies of `family` for `peg`; return their folder and
     names. Training bodies (split train) come from `TRAINING_FAMILIES` only; the held-out
     family is written with split test, for the frozen generalisation set."""
-    if family not in FAMILIES:
-        raise ValueError(f"procedural family: expected one of {list(FAMILIES)}, got {family!r}")
-    if split == "train" and family not in TRAINING_FAMILIES:
-        raise ValueError(
-            f"procedural family {family!r} is held out of training (the generalisation set's)"
-        )
+    try:
+        check_family(family, split)
+    except ValueError as e:
+        raise ValueError(f"procedural family: {e}") from None
     tag = f"-{family}" if family != "plain" else ""
     if folder is None:
         name = f"{peg}-c{clearance:g}-d{depth:g}-s{seed}-n{count}{tag}"

@@ -26,7 +26,8 @@ from cfvs_maniskill.constants import MIN_WALL, hole_half_extent
 Draw = Callable[[np.random.Generator, str, float, Path, str], "tuple[dict, dict] | None"]
 
 
-def _box(size, centre, yaw: float = 0.0) -> trimesh.Trimesh:
+def box_at(size, centre, yaw: float = 0.0) -> trimesh.Trimesh:
+    """A box of `size` turned by `yaw` about z, its centre at `centre`."""
     box = trimesh.creation.box(size)
     box.apply_transform(trimesh.transformations.rotation_matrix(yaw, [0, 0, 1]))
     box.apply_translation(centre)
@@ -41,7 +42,7 @@ def _minus(mesh: trimesh.Trimesh, cuts: list[trimesh.Trimesh]) -> trimesh.Trimes
     return trimesh.boolean.difference([mesh, *cuts], engine="manifold") if cuts else mesh
 
 
-def _keep(peg: str, clearance: float) -> float:
+def keep_clear(peg: str, clearance: float) -> float:
     """Distance from the hole's axis that every element keeps clear."""
     return hole_half_extent(peg, clearance) * np.sqrt(2) + MIN_WALL
 
@@ -61,7 +62,7 @@ def add_ribs(rng, mesh, hole, top, keep):
     ribs = []
     for k in range(int(rng.integers(1, 5))):
         c = hole + u * (gap + k * pitch)
-        ribs.append(_box([thick, length, height + 0.002], [*c, top + height / 2 - 0.001], side))
+        ribs.append(box_at([thick, length, height + 0.002], [*c, top + height / 2 - 0.001], side))
     return _union([mesh, *ribs]), top
 
 
@@ -81,7 +82,7 @@ def add_pockets(rng, mesh, hole, top, keep):
             w, length = rng.uniform(0.006, 0.025), rng.uniform(0.01, 0.05)
             c = hole + u * (keep + MIN_WALL + max(w, length) / 2 + rng.uniform(0.0, 0.03))
             d = rng.uniform(0.003, 0.02)
-            cut = _box([w, length, 2 * d], [*c, top], rng.uniform(0, np.pi))
+            cut = box_at([w, length, 2 * d], [*c, top], rng.uniform(0, np.pi))
         cuts.append(cut)
     return _minus(mesh, cuts), top
 
@@ -94,7 +95,7 @@ def add_counterbore(rng, mesh, hole, top, keep):
         cut = trimesh.creation.cylinder(r, 2 * d, 64)
         cut.apply_translation([*hole, top])
     else:
-        cut = _box([2 * r, 2 * r, 2 * d], [*hole, top], rng.uniform(0, np.pi / 2))
+        cut = box_at([2 * r, 2 * r, 2 * d], [*hole, top], rng.uniform(0, np.pi / 2))
     return _minus(mesh, [cut]), top - d
 
 
@@ -113,7 +114,7 @@ def add_step(rng, mesh, hole, top, keep):
     size = 0.3
     c = hole + _unit(side) * (keep + rng.uniform(0.002, 0.03) + size / 2)
     floor = -0.01 if rng.random() < 0.4 else top * rng.uniform(0.3, 0.85)
-    notch = _box([size, size, 1.0], [*c, floor + 0.5], side + rng.uniform(-0.8, 0.8))
+    notch = box_at([size, size, 1.0], [*c, floor + 0.5], side + rng.uniform(-0.8, 0.8))
     return _minus(mesh, [notch]), top
 
 
@@ -122,7 +123,7 @@ def _slab(rng, keep: float, height: float) -> tuple[trimesh.Trimesh, np.ndarray]
     sx, sy = rng.uniform(2 * keep + 0.01, 0.2, size=2)
     room = np.array([sx, sy]) / 2 - keep
     hole = rng.uniform(-1, 1, size=2) * room
-    return _box([sx, sy, height], [0, 0, height / 2]), hole
+    return box_at([sx, sy, height], [0, 0, height / 2]), hole
 
 
 def write_mesh_body(mesh: trimesh.Trimesh, hole: np.ndarray, top: float, folder: Path, name: str):
@@ -143,7 +144,7 @@ def _write(mesh, hole, top, folder, name):
 
 
 def ribbed_body(rng, peg, clearance, folder: Path, name: str):
-    keep = _keep(peg, clearance)
+    keep = keep_clear(peg, clearance)
     top = rng.uniform(0.05, 0.14)
     mesh, hole = _slab(rng, keep, top)
     for _ in range(int(rng.integers(1, 3))):
@@ -152,7 +153,7 @@ def ribbed_body(rng, peg, clearance, folder: Path, name: str):
 
 
 def pocketed_body(rng, peg, clearance, folder: Path, name: str):
-    keep = _keep(peg, clearance)
+    keep = keep_clear(peg, clearance)
     top = rng.uniform(0.05, 0.14)
     mesh, hole = _slab(rng, keep, top)
     mesh, top = add_pockets(rng, mesh, hole, top, keep)
@@ -163,11 +164,11 @@ def pocketed_body(rng, peg, clearance, folder: Path, name: str):
 
 def narrow_body(rng, peg, clearance, folder: Path, name: str):
     """A bar just wider than the hole's wall, 8-26 cm tall, the hole anywhere along it."""
-    keep = _keep(peg, clearance)
+    keep = keep_clear(peg, clearance)
     top = rng.uniform(0.08, 0.26)
     width = 2 * keep + rng.uniform(0.0, 0.015)
     length = rng.uniform(max(2 * keep + 0.005, 0.09), 0.22)
-    mesh = _box([length, width, top], [0, 0, top / 2], 0.0)
+    mesh = box_at([length, width, top], [0, 0, top / 2], 0.0)
     hole = np.array(
         [rng.uniform(-1, 1) * (length / 2 - keep), rng.uniform(-1, 1) * (width / 2 - keep)]
     )
@@ -182,18 +183,18 @@ ELEMENTS = (add_ribs, add_pockets, add_counterbore, add_step)
 def composite_body(rng, peg, clearance, folder: Path, name: str):
     """An L, T or U outline (boxes), the hole near an inner corner or an end, with two or
     three elements and a boss around the opening half the time."""
-    keep = _keep(peg, clearance)
+    keep = keep_clear(peg, clearance)
     top = rng.uniform(0.05, 0.2)
     arm = rng.uniform(2 * keep + 0.004, 2 * keep + 0.04)  # width of each arm
     span = rng.uniform(0.12, 0.24)
     shape = rng.choice(["L", "T", "U"])
-    parts = [_box([span, arm, top], [0, -span / 2 + arm / 2, top / 2])]  # the base arm
+    parts = [box_at([span, arm, top], [0, -span / 2 + arm / 2, top / 2])]  # the base arm
     if shape in ("L", "U"):
-        parts.append(_box([arm, span, top], [-span / 2 + arm / 2, 0, top / 2]))
+        parts.append(box_at([arm, span, top], [-span / 2 + arm / 2, 0, top / 2]))
     if shape == "U":
-        parts.append(_box([arm, span, top], [span / 2 - arm / 2, 0, top / 2]))
+        parts.append(box_at([arm, span, top], [span / 2 - arm / 2, 0, top / 2]))
     if shape == "T":
-        parts.append(_box([arm, span, top], [0, 0, top / 2]))
+        parts.append(box_at([arm, span, top], [0, 0, top / 2]))
     mesh = _union(parts)
     # The hole on an arm: its inner corner or its far end, within the arm's walls.
     corner = rng.random() < 0.5

@@ -124,6 +124,44 @@ def test_a_round_openings_height_and_none_without_a_clear_face():
     assert face_height(pts, _frame(0.0, (0.2, 0.0, 0.0)), radius, True) == (None, 0)
 
 
+def _round_view(rng, radius=0.025, noise=0.001, shift=0.008, narrowing=0.0006):
+    """Points (hole frame = world) of a face round a circular opening of `radius` at the
+    origin as the wrist camera sees it from the +x side: the face all round but the peg's
+    shadow (a disc 2 mm narrower than the opening, `shift` towards +x: a crescent 6 mm wide
+    beyond the +x edge), the far (-x) half of the wall down to 40 mm seen `narrowing`
+    inside the true circle (the simulated camera's error at walls)."""
+    g = rng.uniform(-0.045, 0.045, size=(40000, 2))
+    d = np.linalg.norm(g, axis=1)
+    in_shadow = np.linalg.norm(g - [shift, 0.0], axis=1) < radius - 0.002
+    face = g[(d > radius) & ~in_shadow]
+    pts = [np.column_stack([face, np.zeros(len(face))])]
+    a = rng.uniform(np.pi / 2, 3 * np.pi / 2, 2000)
+    z = rng.uniform(-0.04, 0.0, 2000)
+    r = radius - narrowing
+    pts.append(np.column_stack([r * np.cos(a), r * np.sin(a), z]))
+    p = np.vstack(pts)
+    return p + rng.normal(0.0, noise, p.shape)
+
+
+@pytest.mark.parametrize("noise, within", [(0.0003, 0.3), (0.001, 0.5)])
+def test_a_round_openings_centre_is_found_from_a_wrong_estimate_despite_the_pegs_shadow(
+    noise, within
+):
+    rng = np.random.default_rng(5)
+    pts = _round_view(rng, noise=noise)
+    for start in [(0.003, -0.002, 0.004), (-0.002, 0.0025, -0.005), (0.0, -0.004, 0.0)]:
+        F = fit_opening(pts, _frame(0.0, start), 0.025, round_opening=True)
+        assert F is not None, start
+        # The shadow's edge is up to 6 mm beyond the true +x edge, the wall 0.6 mm
+        # inside: taken at face value they would put the centre millimetres off.
+        assert _errors(F)[0] < within, (start, _errors(F))
+        assert F[:3, 2] @ [0, 0, 1] > 0.9999  # moved in the face's plane only
+    # Nothing round the estimate, or a face seen on one side only: no answer.
+    assert fit_opening(pts, _frame(0.0, (0.2, 0.0, 0.0)), 0.025, round_opening=True) is None
+    one_side = pts[pts[:, 1] > 0.01]
+    assert fit_opening(one_side, _frame(), 0.025, round_opening=True) is None
+
+
 @pytest.mark.parametrize(
     "name", ["heldoutb_pocket_block_view_11.npz", "heldoutd_twin_boss_view_12.npz"]
 )
@@ -138,6 +176,24 @@ def test_recorded_wrist_views_end_nearer_the_opening_than_the_fine_network(name)
     assert F is not None
     before, after = _errors(view["estimate"], H), _errors(F, H)
     assert before[0] > 1.5 and after[0] < 0.8 and after[1] < 0.8, (before, after)
+
+
+@pytest.mark.parametrize(
+    "name", ["round_heldoutc_chamfered_hub_view_14.npz", "round_heldouth_tiered_block_view_32.npz"]
+)
+def test_recorded_round_wrist_views_end_nearer_the_opening_than_the_fine_network(name):
+    """Real 3-DoF wrist views near the pre-insertion pose (ideal sensor, the shipped round
+    nets before their retraining; development sets C and H, benchmarks/opening_fit.py):
+    OPN's estimate was 3.5 and 4.2 mm off the axis beside a chamfered hub and a tiered
+    block; the circle fitted to the opening brings both within 0.7 mm (0.68, 0.19)."""
+    view = np.load(DATA / name)
+    H = view["true_hole"]
+    F = fit_opening(
+        view["points"].astype(np.float64), view["estimate"], float(view["half"]), round_opening=True
+    )
+    assert F is not None
+    before, after = _errors(view["estimate"], H)[0], _errors(F, H)[0]
+    assert before > 3.0 and after < 0.75, (before, after)
 
 
 @pytest.mark.slow

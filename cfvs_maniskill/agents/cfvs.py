@@ -7,8 +7,9 @@
    the offset is below (e_t, e_r) or `max_fine_iterations` is reached. In 6-DoF (beyond
    the paper, `rim_plane`) the offset's tilt is replaced by the normal of the face around
    the opening OPN points at (perception/rim.py): OPN gives where the hole is, the face
-   gives its axis; for a square hole the opening seen on that face then gives its centre
-   and yaw (`opening_fit`, perception/opening.py), OPN's estimate the place to look.
+   gives its axis (3- and 4-DoF holes are upright); the opening seen on that face then
+   gives its centre, and a square's yaw (`opening_fit`, perception/opening.py), OPN's
+   estimate the place to look.
 3. Insert along the tool axis (shared executor, force-bounded).
 
 Every component is a CFVSConfig switch; ABLATIONS names the agent that changes one
@@ -79,35 +80,36 @@ class CFVSConfig:
     paper's Algorithm 2, which inserts from where the last check was made, leaving up to
     e_t of the offset it measured."""
     rim_plane: bool = True
-    """6-DoF: take the hole's axis from the face around the opening (perception/rim.py)
-    instead of OPN's tilt; OPN still gives where the hole is. False: the paper's fine
-    stage (the `cfvs_no_rim` ablation)."""
+    """Refine OPN's estimate by the geometry of the face round the opening it points at
+    (`refine`): in 6-DoF the hole's axis becomes the face's normal (perception/rim.py; 3-
+    and 4-DoF holes are upright); OPN still gives where the hole is. False: the paper's
+    fine stage (the `cfvs_no_rim` ablation)."""
     rim_parallel_planes: bool = True
-    """Check the face's least-median plane against a fit of the ring's parallel planar
+    """6-DoF: check the face's least-median plane against a fit of the ring's parallel planar
     patches (perception/rim.py) and take the latter where they disagree: beside a rib or a
     step the face may hold under half the ring. False: the least-median plane alone."""
     rim_square_ring: bool = True
-    """Square holes: the ring follows the opening's sides (from OPN's yaw), starting 4 mm
-    outside them. False: a round ring beyond the opening's corners, which can fall off a
+    """6-DoF square holes: the ring follows the opening's sides (from OPN's yaw), starting 4
+    mm outside them. False: a round ring beyond the opening's corners, which can fall off a
     small face (a boss, a hub) onto whatever is beyond."""
     rim_narrow_ring: bool = True
-    """The rim fit tries a 10 mm ring before the 20 mm one and keeps it when the noise
-    measured on it predicts a normal within 0.1 deg (perception/rim.py): beside a step
+    """6-DoF: the rim fit tries a 10 mm ring before the 20 mm one and keeps it when the
+    noise measured on it predicts a normal within 0.1 deg (perception/rim.py): beside a step
     round the opening (a counterbore) the wide ring reaches the step. False: the 20 mm
     ring always."""
     opening_fit: bool = True
-    """6-DoF square holes, with `rim_plane`: move the estimate in the face's plane and turn
-    it about its axis onto the opening the wrist cloud shows, from the face's edge and the
-    walls in view (perception/opening.py; the hole's size is the task's nominal one).
-    False: OPN's position and yaw. Round holes keep OPN's."""
+    """With `rim_plane`: move the estimate in the face's plane (and turn a square about its
+    axis) onto the opening the wrist cloud shows, from the face's edge and the walls in
+    view (perception/opening.py; the hole's size is the task's nominal one): a square's
+    sides, a round hole's circle. False: OPN's position and yaw."""
     face_height: bool = True
-    """6-DoF, with `rim_plane`: put the hole's opening at the level of the face seen just
-    outside it (perception/opening.face_height) instead of OPN's height, which walls and
-    flanges beside the opening pull up. False: OPN's height."""
+    """With `rim_plane`: put the hole's opening at the level of the face seen just outside
+    it (perception/opening.face_height) instead of OPN's height, which walls and flanges
+    beside the opening pull up. False: OPN's height."""
     face_guard: bool = True
-    """6-DoF, with `face_height`: when OPN's new estimate has no face round its opening in
-    the cloud (fewer than MIN_LEVEL_POINTS 1-6 mm outside it) after an estimate that had
-    one, the fine loop stops and the peg is inserted from where it is, the pose of the last
+    """With `face_height`: when OPN's new estimate has no face round its opening in the
+    cloud (fewer than MIN_LEVEL_POINTS 1-6 mm outside it) after an estimate that had one,
+    the fine loop stops and the peg is inserted from where it is, the pose of the last
     estimate the face supported: beside a step OPN can jump to another surface and back.
     False: every estimate is taken."""
     clear_view: bool = True
@@ -154,10 +156,10 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     "no_map": ("confidence_map", "keypoints as the uniform mean of the candidates"),
     "aug": ("augmentation", "networks trained with the paper's augmentation"),
     # The paper's own fine stage, and one per component of ours (docs/cfvs.md).
-    "no_rim": ("rim_plane", "the hole's axis from OPN, not from the face round the opening"),
+    "no_rim": ("rim_plane", "the paper's fine stage: OPN's estimate, no face geometry"),
     "opn_height": ("face_height", "the opening's height from OPN, not from the face"),
     "no_face_guard": ("face_guard", "every fine estimate taken, with or without a face"),
-    "no_opening": ("opening_fit", "a square hole's centre and yaw from OPN alone"),
+    "no_opening": ("opening_fit", "the opening's centre (a square's yaw) from OPN alone"),
     "no_parallel": ("rim_parallel_planes", "the face's plane by least median of squares alone"),
     "wide_ring": ("rim_narrow_ring", "the rim fit on the 20 mm ring always"),
     "round_ring": ("rim_square_ring", "a round rim ring beyond a square opening's corners"),
@@ -271,51 +273,58 @@ class CFVSAgent(Agent):
         k, _ = weighted_keypoints(x, offsets, torch.sigmoid(logits))
         return np.array([L.fine_action_from_keypoints(ki.numpy()) for ki in k], np.float64)
 
-    def axis_from_rim(
+    def refine(
         self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray
     ) -> tuple[np.ndarray, str, bool | None]:
-        """OPN's offset `a` with the hole's axis replaced by the normal of the face around
-        the opening it points at (and, with `opening_fit`, its centre and a square's yaw by
-        the opening seen on that face; with `face_height`, its height), where the offset
-        came from, and whether the face was seen round the opening (None: not measured);
-        (a, "OPN offset", None) when the ring gives no face."""
+        """OPN's offset `a` refined by the geometry of the face round the opening it points
+        at: in 6-DoF the hole's axis from the face's normal (`rim_plane`; 3- and 4-DoF holes
+        are upright), then the centre (and a square's yaw) from the opening seen on that
+        face (`opening_fit`) and its height from the face (`face_height`). Returns the
+        offset, where it came from, and whether the face was seen round the opening (None:
+        not measured); (a, "OPN offset", None) when the 6-DoF ring gives no face."""
         T = L.apply_action(tcp, a)
+        T = T if self.task.dof == 6 else self.constrain(T, tcp)
         H = L.hole_frame_from_pre_insertion(T)
         world = tool_to_world(pts, tcp)
         half = hole_half_extent(self.peg, self.task.clearance)
-        reach, square_x = half, None
-        if self.peg == "square" and self.cfg.rim_square_ring:
-            square_x = H[:3, 0]  # the ring follows the opening's sides
-        elif self.peg == "square":
-            reach *= np.sqrt(2)  # a round ring beyond the opening's corners
-        n = rim_normal(
-            world,
-            H[:3, 3],
-            H[:3, 2],
-            reach,
-            self.rng,
-            parallel_planes=self.cfg.rim_parallel_planes,
-            square_x=square_x,
-            narrow_first=self.cfg.rim_narrow_ring,
+        round_opening = self.peg == "round"
+        where = "upright axis"
+        if self.task.dof == 6:
+            reach, square_x = half, None
+            if not round_opening and self.cfg.rim_square_ring:
+                square_x = H[:3, 0]  # the ring follows the opening's sides
+            elif not round_opening:
+                reach *= np.sqrt(2)  # a round ring beyond the opening's corners
+            n = rim_normal(
+                world,
+                H[:3, 3],
+                H[:3, 2],
+                reach,
+                self.rng,
+                parallel_planes=self.cfg.rim_parallel_planes,
+                square_x=square_x,
+                narrow_first=self.cfg.rim_narrow_ring,
+            )
+            if n is None:
+                return a, "OPN offset", None
+            H, where = align_axis(H, n), "axis from the rim"
+        seen = (
+            fit_opening(world, H, half, round_opening=round_opening)
+            if self.cfg.opening_fit
+            else None
         )
-        if n is None:
-            return a, "OPN offset", None
-        H = align_axis(H, n)
-        seen = None
-        if self.cfg.opening_fit and self.peg == "square":
-            seen = fit_opening(world, H, half)
-        where = "OPN position" if seen is None else "centre from the opening"
+        where += ", OPN position" if seen is None else ", centre from the opening"
         H = H if seen is None else seen
         face_seen = None
         if self.cfg.face_height:
-            level, ring_points = face_height(world, H, half, round_opening=self.peg == "round")
+            level, ring_points = face_height(world, H, half, round_opening=round_opening)
             face_seen = ring_points >= MIN_LEVEL_POINTS
             if level is not None:
                 H = H.copy()
                 H[:3, 3] += level * H[:3, 2]
                 where += ", height from the face"
         pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
-        return L.fine_action(tcp, pose), f"axis from the rim, {where}", face_seen
+        return L.fine_action(tcp, pose), where, face_seen
 
     def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
         """The pre-insertion pose over hole frame `H`: at the yaw nearest the tool's own or,
@@ -350,8 +359,8 @@ class CFVSAgent(Agent):
             if a is None:
                 return Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"
-            if self.task.dof == 6 and self.cfg.rim_plane:
-                a, source, face_seen = self.axis_from_rim(a, pts, tcp)
+            if self.cfg.rim_plane:
+                a, source, face_seen = self.refine(a, pts, tcp)
                 if self.cfg.face_guard and face_seen is False and self.had_face:
                     self.stage = "insert"
                     self.phase = "fine: no face round OPN's new estimate, insert from the last"

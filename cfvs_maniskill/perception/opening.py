@@ -1,4 +1,5 @@
-"""Where a square opening is on its face: its centre and yaw from the wrist cloud.
+"""Where an opening is on its face: a square's centre and yaw, a circle's centre, from the
+wrist cloud.
 
 At the pre-insertion pose the wrist camera sees the face round the opening, the far wall
 of the hole below it and the tops of the two side walls; the peg hides the hole's inside
@@ -17,12 +18,17 @@ of the same kind; on the axis the camera looks along, where only the far wall is
 face edge opposite it is the peg's shadow), it is the nominal half width from that wall,
 less how much narrower than nominal the two side walls look (measured in the same view:
 the simulated camera puts walls ~0.6 mm inside, and a real one has its own error). The
-yaw is the walls' mean slope. Measured on 42 wrist views of the 0.5 mm task (ideal sensor,
+yaw is the walls' mean slope. A round opening's centre is a least-squares circle of its
+known radius through the edge seen in each sector round it (the face's edge, or the wall's
+points where the wall is seen), with how much narrower the walls look than the face's edge
+as one more unknown, and sectors far off the circle (the peg's shadow) left out. Measured on 42 wrist views of the 0.5 mm task (ideal sensor,
 test and held-out objects): lateral error p50 / p90 1.26 / 2.61 -> 0.35 / 0.86 mm, yaw
 0.83 / 2.02 -> 0.19 / 0.55 deg (docs/cfvs.md).
 """
 
 from __future__ import annotations
+
+from itertools import combinations
 
 import numpy as np
 
@@ -67,25 +73,46 @@ MAX_SHIFT = 0.006
 else's edge, and not used."""
 MAX_TURN_DEG = 6.0
 """... or turning the square further than this."""
+SECTORS = 24
+"""A round opening's edge is measured in this many equal sectors round the estimate ..."""
+MIN_SECTORS = 8
+"""... and a circle fitted only through at least this many of them ..."""
+MIN_SECTOR_WALL = 8
+"""... a sector's wall counting with this many points (a 15 deg arc of MIN_WALL_POINTS') ..."""
+SECTOR_OUTLIER = 0.0005
+"""... through the sectors within this of it (the peg's shadow moves a face edge outwards
+by millimetres)."""
+MAX_CONDITION = 10.0
+"""The walls' narrowing is fitted only when the sectors' equations tell it from the centre
+this well (condition number)."""
+MIN_SPREAD = 0.25
+"""The sectors' directions must surround the centre: the smaller eigenvalue of their mean
+outer product at least this (0.5 all round, 0 for one direction)."""
 WIDTH_TOLERANCE = (-0.001, 0.004)
 """Two opposite sides are used only when they are 2 x half this far from the opening's
 nominal width apart (a chamfered or worn edge is wider; nearer is something else)."""
 
 
 def fit_opening(
-    points: np.ndarray, frame: np.ndarray, half: float, iterations: int = 2
+    points: np.ndarray,
+    frame: np.ndarray,
+    half: float,
+    iterations: int = 2,
+    round_opening: bool = False,
 ) -> np.ndarray | None:
-    """The hole frame `frame` (4x4: origin at the estimated square opening, z out of the
-    hole along the face's normal, x along a side) moved in the face's plane and turned
-    about its z onto the opening seen in `points` (n, 3, same frame as `frame`); None when
-    the face and walls round it are not seen well enough, or the fit moves it further than
-    MAX_SHIFT / MAX_TURN_DEG. `half`: the opening's nominal half width."""
+    """The hole frame `frame` (4x4: origin at the estimated opening, z out of the hole along
+    the face's normal, x along a side of a square) moved in the face's plane and, for a
+    square, turned about its z onto the opening seen in `points` (n, 3, same frame as
+    `frame`); None when the face and walls round it are not seen well enough, or the fit
+    moves it further than MAX_SHIFT / MAX_TURN_DEG. `half`: the opening's nominal half
+    width, or its radius with `round_opening`."""
     # Only what the fit can reach (the rest of the cloud is most of it).
     q = (points - frame[:3, 3]) @ frame[:3, :2]
-    points = points[np.abs(q).max(axis=1) < half + SEARCH + MAX_SHIFT]
+    r = np.linalg.norm(q, axis=1) if round_opening else np.abs(q).max(axis=1)
+    points = points[r < half + SEARCH + MAX_SHIFT]
     H = frame.copy()
     for _ in range(iterations):
-        step = _fit_once(points, H, half)
+        step = _fit_once(points, H, half, round_opening)
         if step is None:
             return None
         H = step
@@ -95,16 +122,18 @@ def fit_opening(
     return H
 
 
-def _fit_once(points: np.ndarray, H: np.ndarray, half: float) -> np.ndarray | None:
+def _fit_once(
+    points: np.ndarray, H: np.ndarray, half: float, round_opening: bool
+) -> np.ndarray | None:
     q = (points - H[:3, 3]) @ H[:3, :3]  # the estimate's frame: x, y in the face, z out
-    r = np.abs(q[:, :2]).max(axis=1)
+    r = np.linalg.norm(q[:, :2], axis=1) if round_opening else np.abs(q[:, :2]).max(axis=1)
     level, spread, _ = _ring_level(q[:, 2], r, half)
     if level is None or spread > MAX_NOISE:
         return None
     band = max(MIN_DEPTH_BAND, 4.0 * spread)
     face = q[(np.abs(q[:, 2] - level) < band) & (r < half + SEARCH)]
     wall = q[(q[:, 2] < level - band) & (q[:, 2] > level - WALL_DEPTH) & (r < half + SEARCH)]
-    fit = _square(face, wall, half)
+    fit = _circle(face, wall, half) if round_opening else _square(face, wall, half)
     if fit is None:
         return None
     (cx, cy), yaw = fit
@@ -235,6 +264,62 @@ def _square(face: np.ndarray, wall: np.ndarray, half: float):
             centre[axis] = sg * (at - (half - float(np.mean(narrowing))))
     yaw = float(np.average(slopes, weights=weights)) if weights else 0.0
     return (centre[0], centre[1]), yaw
+
+
+def _circle(face: np.ndarray, wall: np.ndarray, radius: float):
+    """((cx, cy), 0) of a round opening of `radius` from the face points `face` and the
+    points below the face `wall` (its frame), or None. Each sector gives one edge: where
+    its wall is seen, the wall's median distance (noise lifts the wall's top into the
+    face's band, inside the edge), else where the face begins (edge_crossing)."""
+    width = 2 * np.pi / SECTORS
+    rows, edges = [], []
+    for k in range(SECTORS):
+        mid = -np.pi + (k + 0.5) * width
+        u = np.array([np.cos(mid), np.sin(mid)])
+        for pts, kind in ((wall, 1.0), (face, 0.0)):
+            a = np.arctan2(pts[:, 1], pts[:, 0])
+            in_sector = np.abs((a - mid + np.pi) % (2 * np.pi) - np.pi) < width / 2
+            rho = np.linalg.norm(pts[in_sector, :2], axis=1)
+            if kind:
+                rho = rho[np.abs(rho - radius) < WALL_NEAR + SEARCH / 2]
+                if len(rho) < MIN_SECTOR_WALL:
+                    continue
+                edge = float(np.median(rho))
+            else:
+                edge = edge_crossing(rho[rho > radius - SEARCH], radius)
+                if edge is None:
+                    continue
+            rows.append([u[0], u[1], -kind])  # walls: the edge less their narrowing
+            edges.append(edge - radius)
+            break
+    A, b = np.array(rows).reshape(-1, 3), np.array(edges)
+    if len(b) < MIN_SECTORS:
+        return None
+    # The walls' narrowing is an unknown only where the sectors tell it from the centre
+    # (walls beside face edges, or walls all round), else taken as none.
+    cols = [0, 1, 2] if np.linalg.cond(A) < MAX_CONDITION else [0, 1]
+    A = A[:, cols]
+    # The circle most sectors agree with, from every minimal set of them (a few hundred
+    # small solves): the peg's shadow moves several sectors' face edge outwards by
+    # millimetres, and a least-squares fit through them all would follow it.
+    sets = np.array(list(combinations(range(len(b)), len(cols))))
+    M = A[sets]
+    solvable = np.abs(np.linalg.det(M)) > 1e-3
+    if not solvable.any():
+        return None
+    trial = np.linalg.solve(M[solvable], b[sets[solvable]][..., None])[..., 0]
+    off = np.abs(trial @ A.T - b)
+    agree = off < SECTOR_OUTLIER
+    best = int(np.argmax(agree.sum(axis=1) - np.where(agree, off, 0.0).sum(axis=1)))
+    keep = agree[best]
+    if keep.sum() < MIN_SECTORS:
+        return None
+    full = np.zeros(3)
+    full[cols] = np.linalg.lstsq(A[keep], b[keep], rcond=None)[0]
+    dirs = A[keep, :2]
+    if len(dirs) < MIN_SECTORS or np.linalg.eigvalsh(dirs.T @ dirs / len(dirs))[0] < MIN_SPREAD:
+        return None
+    return (float(full[0]), float(full[1])), 0.0
 
 
 def _line_slope(x: np.ndarray, y: np.ndarray) -> float:

@@ -300,8 +300,8 @@ def _circle(face: np.ndarray, wall: np.ndarray, radius: float):
     cols = [0, 1, 2] if np.linalg.cond(A) < MAX_CONDITION else [0, 1]
     A = A[:, cols]
     # The circle most sectors agree with, from every minimal set of them (about 2000 small
-    # solves; the whole fit takes ~6 ms): the peg's shadow moves several sectors' face edge outwards by
-    # millimetres, and a least-squares fit through them all would follow it.
+    # solves; the whole fit takes ~6 ms): the peg's shadow moves several sectors' face edge
+    # outwards by millimetres, and a least-squares fit through them all would follow it.
     sets = np.array(list(combinations(range(len(b)), len(cols))))
     M = A[sets]
     solvable = np.abs(np.linalg.det(M)) > 1e-3

@@ -263,3 +263,23 @@ def test_the_fine_loop_stops_where_opns_new_estimate_has_no_face_round_it(make_e
         init_error="small",
     )
     assert outcome["guard"][0], outcome
+
+
+@pytest.mark.slow
+def test_the_opening_fit_benchmark_records_every_view_it_measures(tmp_path):
+    """benchmarks/opening_fit.py on two 3-DoF views: the JSON names each view's object and
+    its OPN and fitted errors, and the summary counts what it fitted."""
+    import json
+
+    from benchmarks.opening_fit import Args, main
+
+    out = tmp_path / "views.json"
+    summary = main(Args(task="PegInsert3DoF", views=2, out=out, save_views=tmp_path / "v"))
+    record = json.loads(out.read_text())
+    views = record["views"]
+    assert summary == record["summary"] and summary["views"] == len(views) >= 1
+    assert summary["fitted"] == sum(v["fit_mm"] is not None for v in views)
+    for v in views:
+        assert v["object"] and 0.0 <= v["opn_mm"] < 50.0, v
+        saved = np.load(tmp_path / "v" / f"{v['object']}_view_{v['view']}.npz")
+        assert saved["points"].shape[1] == 3 and saved["true_hole"].shape == (4, 4)

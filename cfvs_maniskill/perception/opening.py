@@ -272,14 +272,18 @@ def _circle(face: np.ndarray, wall: np.ndarray, radius: float):
     its wall is seen, the wall's median distance (noise lifts the wall's top into the
     face's band, inside the edge), else where the face begins (edge_crossing)."""
     width = 2 * np.pi / SECTORS
+    # Each point's angle and distance round the estimate, once for all sectors.
+    polar = [
+        (np.arctan2(p[:, 1], p[:, 0]), np.linalg.norm(p[:, :2], axis=1), kind)
+        for p, kind in ((wall, 1.0), (face, 0.0))
+    ]
     rows, edges = [], []
     for k in range(SECTORS):
         mid = -np.pi + (k + 0.5) * width
         u = np.array([np.cos(mid), np.sin(mid)])
-        for pts, kind in ((wall, 1.0), (face, 0.0)):
-            a = np.arctan2(pts[:, 1], pts[:, 0])
+        for a, dist, kind in polar:
             in_sector = np.abs((a - mid + np.pi) % (2 * np.pi) - np.pi) < width / 2
-            rho = np.linalg.norm(pts[in_sector, :2], axis=1)
+            rho = dist[in_sector]
             if kind:
                 rho = rho[np.abs(rho - radius) < WALL_NEAR + SEARCH / 2]
                 if len(rho) < MIN_SECTOR_WALL:

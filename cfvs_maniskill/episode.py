@@ -40,10 +40,10 @@ class EpisodeResult:
     provenance: dict = field(default_factory=dict)
     """Which code, weights, sensor profile, task and object files made it (provenance.py)."""
     move_residuals: list = field(default_factory=list)
-    planned_moves: int = 0
-    """Moves that followed a planned collision-free path instead of the straight line."""
     """After each of the agent's moves, the true error from the pre-insertion pose:
     [lateral mm, tilt deg] (measured by the runner from true poses; agents never see it)."""
+    planned_moves: int = 0
+    """Moves that followed a planned collision-free path instead of the straight line."""
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -59,7 +59,7 @@ def agent_seed(episode_seed: int) -> int:
     return int.from_bytes(digest.digest(), "little") & 0x7FFFFFFF
 
 
-def failure_reason(m: dict, depth: float) -> str:
+def failure_reason(m: dict) -> str:
     """Why a finished insertion is not a success, from the env's evaluate() metrics."""
     if m["tilt_error_deg"] > 10:
         return f"peg tilted {m['tilt_error_deg']:.1f} deg from the hole axis"
@@ -70,9 +70,9 @@ def failure_reason(m: dict, depth: float) -> str:
         if m["lateral_offset"] < 0.06:
             return f"peg stopped on the rim ({1000 * m['lateral_offset']:.1f} mm off the axis)"
         return f"peg missed the hole ({1000 * m['lateral_offset']:.0f} mm off the axis)"
-    if abs(m["tip_to_bottom"]) <= SUCCESS_TIP_TOLERANCE:
-        # As deep as the hole's bottom, so the peg is not in it: it went down beside the
-        # part (a hole near an edge) or through a gap next to the opening.
+    if m["tip_to_bottom"] <= SUCCESS_TIP_TOLERANCE:
+        # As deep as the hole's bottom or deeper, so the peg is not in it: it went down
+        # beside the part (a hole near an edge), into another opening or through a gap.
         return f"peg went down beside the hole ({1000 * m['lateral_offset']:.1f} mm off the axis)"
     return f"peg stuck {1000 * m['tip_to_bottom']:.1f} mm above the hole's bottom"
 
@@ -152,7 +152,7 @@ def run_episode(
     m = {k: float(v[0]) for k, v in u.evaluate().items()}
     success = bool(m["success"]) and inserted
     if not success and not reason:
-        reason = failure_reason(m, u.task.hole_depth)
+        reason = failure_reason(m)
     if film is not None:
         executor.on_step = None
         film.finish(executor.servo_time, "success" if success else f"failure: {reason}")

@@ -560,3 +560,24 @@ def test_compressed_records_are_read_and_a_resumed_run_appends_beside_them(tmp_p
     done = read_done(path)
     assert len(done) == 11 and records[10]["key"] in done
     assert len(load_records(run)) == 11
+
+
+@pytest.mark.parametrize(
+    "metrics, expected",
+    [
+        # Recorded on a composite body: the peg went down 96 mm off the axis, 17 mm deeper
+        # than the hole's bottom; it once read "stuck -17.0 mm above the hole's bottom".
+        (dict(tilt_error_deg=0.0, tip_depth=0.06, lateral_offset=0.0967, tip_to_bottom=-0.017),
+         "peg went down beside the hole (96.7 mm off the axis)"),
+        (dict(tilt_error_deg=0.0, tip_depth=0.05, lateral_offset=0.001, tip_to_bottom=0.012),
+         "peg stuck 12.0 mm above the hole's bottom"),
+        (dict(tilt_error_deg=0.0, tip_depth=0.0, lateral_offset=0.002, tip_to_bottom=0.06),
+         "peg stopped on the rim (2.0 mm off the axis)"),
+        (dict(tilt_error_deg=12.5, tip_depth=0.02, lateral_offset=0.001, tip_to_bottom=0.04),
+         "peg tilted 12.5 deg from the hole axis"),
+    ],
+)  # fmt: skip
+def test_a_failed_insertion_is_named_by_where_the_peg_ended(metrics, expected):
+    from cfvs_maniskill.episode import failure_reason
+
+    assert failure_reason(metrics) == expected

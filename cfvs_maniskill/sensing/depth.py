@@ -172,7 +172,8 @@ def apply_stereo(
     noise_gain = np.float32(1.0)
     if texture:
         cos_inc = np.cos(np.radians(np.nan_to_num(inc, nan=0.0))).astype(np.float32)
-        with np.errstate(divide="ignore"):
+        # A surface turned away from the camera (cos < 0) has no fill (NaN): it never matches.
+        with np.errstate(divide="ignore", invalid="ignore"):
             snr = texture_snr(model, surface[0], surface[1], cos_inc)
             noise_gain = np.sqrt(1 + (model.texture_noise_snr / snr) ** 2).astype(np.float32)
             fill = ndtr(np.log(snr / model.texture_fill_snr) / model.texture_fill_spread)

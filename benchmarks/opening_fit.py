@@ -55,10 +55,10 @@ def lateral_mm(F: np.ndarray, H: np.ndarray) -> float:
 def main(args: Args) -> dict:
     import torch
 
-    from cfvs_maniskill import geometry as G
     from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
     from cfvs_maniskill.agents.interface import TaskSpec
-    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, hole_half_extent
+    from cfvs_maniskill.constants import hole_half_extent
+    from cfvs_maniskill.data.collect import fine_start
     from cfvs_maniskill.envs.lookup import find_task
     from cfvs_maniskill.perception import labels as L
     from cfvs_maniskill.perception.clouds import fine_crop, object_points, tool_to_world
@@ -82,16 +82,8 @@ def main(args: Args) -> dict:
         finally:
             u.defer_obs = False
         H = u.hole_pose.copy()
-        T0 = u.insertion_pose(-PRE_INSERT_HEIGHT, H)
-        q_seed = u.agent.robot.get_qpos()[0].numpy()
-        for _ in range(50):
-            offset = L.random_offset(
-                rng, args.max_offset / 1000.0, task.fine_max_tilt_deg, task.fine_max_yaw_deg
-            )
-            q, ok = u.ik(agent.constrain(T0 @ G.inv(offset), T0), q_seed)
-            if ok:
-                break
-        else:
+        q = fine_start(u, H, rng, args.max_offset / 1000.0, constrain=agent.constrain)
+        if q is None:
             continue
         u.agent.reset(torch.as_tensor(q, dtype=torch.float32)[None])
         obs = u.get_obs()

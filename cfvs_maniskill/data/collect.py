@@ -159,6 +159,29 @@ def family(args: CollectArgs) -> str:
     return chosen
 
 
+def fine_start(u, H: np.ndarray, rng, max_translation: float, constrain=None, tries: int = 50):
+    """Joints putting the tool at a random fine-stage error from the true pre-insertion pose
+    (the paper's "-dt, -dtheta"; tilt and yaw within the task's limits, `constrain(T, T0)`
+    keeps the task's DoF): the first of `tries` draws the arm reaches with the tip still
+    out of the object; None if none is."""
+    task = u.task
+    q_seed = u.agent.robot.get_qpos()[0].numpy()
+    T0 = u.insertion_pose(-PRE_INSERT_HEIGHT, H)
+    for _ in range(tries):
+        offset = L.random_offset(
+            rng, max_translation, task.fine_max_tilt_deg, task.fine_max_yaw_deg
+        )
+        Tp = T0 @ G.inv(offset)
+        if constrain is not None:
+            Tp = constrain(Tp, T0)
+        if (G.inv(H) @ Tp)[2, 3] < 0.005:
+            continue  # the tip would be inside the object: not a pose the servo visits
+        q, ok = u.ik(Tp, q_seed)
+        if ok:
+            return q
+    return None
+
+
 class Collector:
     """Owns the simulator scene(s) and draws sample i on demand."""
 
@@ -259,20 +282,8 @@ class Collector:
 
     def _fine(self, u, H, rng, i):
         task = self.task
-        q_seed = u.agent.robot.get_qpos()[0].numpy()
-        T0 = u.insertion_pose(-PRE_INSERT_HEIGHT, H)
-        for _ in range(50):
-            offset = L.random_offset(
-                rng, task.fine_max_translation, task.fine_max_tilt_deg, task.fine_max_yaw_deg
-            )
-            Tp = T0 @ G.inv(offset)  # the paper's "-dt, -dtheta" from the true pose
-            tip_in_hole = G.inv(H) @ Tp
-            if tip_in_hole[2, 3] < 0.005:
-                continue  # the tip would be inside the object: not a pose the servo visits
-            q, ok = u.ik(Tp, q_seed)
-            if ok:
-                break
-        else:
+        q = fine_start(u, H, rng, task.fine_max_translation)
+        if q is None:
             return None
         u.agent.reset(torch.as_tensor(q, dtype=torch.float32)[None])
         obs = u.get_obs()

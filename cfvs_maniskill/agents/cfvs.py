@@ -290,21 +290,7 @@ class CFVSAgent(Agent):
         round_opening = self.peg == "round"
         where = "upright axis"
         if self.task.dof == 6:
-            reach, square_x = half, None
-            if not round_opening and self.cfg.rim_square_ring:
-                square_x = H[:3, 0]  # the ring follows the opening's sides
-            elif not round_opening:
-                reach *= np.sqrt(2)  # a round ring beyond the opening's corners
-            n = rim_normal(
-                world,
-                H[:3, 3],
-                H[:3, 2],
-                reach,
-                self.rng,
-                parallel_planes=self.cfg.rim_parallel_planes,
-                square_x=square_x,
-                narrow_first=self.cfg.rim_narrow_ring,
-            )
+            n = self.rim_axis(world, H, half)
             if n is None:
                 return a, "OPN offset", None
             H, where = align_axis(H, n), "axis from the rim"
@@ -325,6 +311,25 @@ class CFVSAgent(Agent):
                 where += ", height from the face"
         pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
         return L.fine_action(tcp, pose), where, face_seen
+
+    def rim_axis(self, world: np.ndarray, H: np.ndarray, half: float) -> np.ndarray | None:
+        """The hole's axis from the face round the opening of hole frame `H` (its normal,
+        `rim_plane`), or None when the ring round the opening shows no face."""
+        reach, square_x = half, None
+        if self.peg == "square" and self.cfg.rim_square_ring:
+            square_x = H[:3, 0]  # the ring follows the opening's sides
+        elif self.peg == "square":
+            reach *= np.sqrt(2)  # a round ring beyond the opening's corners
+        return rim_normal(
+            world,
+            H[:3, 3],
+            H[:3, 2],
+            reach,
+            self.rng,
+            parallel_planes=self.cfg.rim_parallel_planes,
+            square_x=square_x,
+            narrow_first=self.cfg.rim_narrow_ring,
+        )
 
     def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
         """The pre-insertion pose over hole frame `H`: at the yaw nearest the tool's own or,

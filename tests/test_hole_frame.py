@@ -152,8 +152,8 @@ def test_hole_at_and_hole_frame_together_are_refused(tmp_path):
 
 def test_cache_keys_of_files_without_hole_frame_are_unchanged():
     """Adding the field must not invalidate users' caches: the default objects' keys are
-    the ones the committed geometry was built under (BUILD_VERSION 4, session 17: the
-    seamless hole walls; a version bump is the one thing meant to change them)."""
+    the ones the committed geometry was built under (BUILD_VERSION 4: the seamless hole
+    walls; a version bump is the one thing meant to change them)."""
     from cfvs_maniskill.objects.build import geometry_key
 
     spec = load_library().specs["cuboid_test_1"]

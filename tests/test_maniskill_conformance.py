@@ -257,7 +257,7 @@ def test_state_round_trip_across_episodes(make_env, obs_mode, api):
 
 STRAY_PIXELS = 8
 """Pixels allowed to differ beyond the rounding step away from any depth edge (of 16384):
-full-suite runs have shown 2 and (session 17) 5 such points where the same test alone
+full-suite runs have shown 2 to 5 such points where the same test alone
 passes with none; a wrong or missing hole moves thousands."""
 
 

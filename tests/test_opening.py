@@ -222,11 +222,11 @@ def test_the_opening_fit_seats_a_tight_peg_beside_ribs_where_opn_alone_stops_on_
 def test_the_face_height_frees_tight_pegs_that_opns_height_left_on_the_rim_or_wedged(make_env):
     """Held-out 0.5 mm scenes where OPN's height misleads the force-guided insertion, which
     counts its phases from the expected entry: set D's flanged pipe (OPN put its opening
-    13-25 mm off in session 19's traces; the peg ends on the rim after the search) and set
-    B's pocket block (OPN 3-4 mm high; the peg stops wedged 1.7 mm into the entry, taken for
-    one deep in the hole). With the opening's height from the face both insert. (Session
-    19's walled-plate scene no longer tells them apart: with the tight tasks' 0.2 mm
-    contact offset OPN's height inserts there too.) Seeds from results/heldout_tight. Only
+    13-25 mm off in traces; the peg ends on the rim after the search) and set B's pocket
+    block (OPN 3-4 mm high; the peg stops wedged 1.7 mm into the entry, taken for one deep
+    in the hole). With the opening's height from the face both insert. (Set A's walled
+    plate no longer tells them apart: with the tight tasks' 0.2 mm contact offset OPN's
+    height inserts there too.) Seeds from results/heldout_tight. Only
     the agent's success is asserted (as above: the ablation's outcome on one scene depends
     on its point subsets and PhysX's contact history)."""
     for folder, obj, seed, init_error, stop in (

@@ -106,8 +106,9 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
     make_env,
 ):
     """Held-out set C's wall bracket (an upright wall 10 cm tall, 2.5 cm from the hole),
-    6-DoF: at the yaw nearest the tool's the camera ends up behind the wall and the fine
-    stage sees nothing; turned to a clear side the same scene inserts."""
+    6-DoF: at the yaw nearest the tool's the camera ends up behind the wall (the fine stage
+    sees nothing, or, with the retrained square net, steers the arm into the wall); turned
+    to a clear side the same scene inserts."""
     outcome = held_out_outcomes(
         make_env,
         "PegInsert6DoF-v1",
@@ -116,5 +117,6 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
         191,
         {"nearest": {"clear_view": False}, "clear": {}},
     )
-    assert not outcome["nearest"][0] and "nothing seen" in outcome["nearest"][1], outcome
+    reason = outcome["nearest"][1]
+    assert not outcome["nearest"][0] and ("nothing seen" in reason or "blocked" in reason), outcome
     assert outcome["clear"][0], outcome

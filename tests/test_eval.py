@@ -94,6 +94,29 @@ def test_a_killed_worker_is_replaced_and_its_job_retried(reference, tmp_path):
 
 
 @pytest.mark.slow
+def test_workers_end_when_the_evaluation_is_killed(tmp_path):
+    """The evaluation SIGKILLed mid-run (no clean-up runs): its workers exit by themselves
+    within seconds instead of finishing their episodes on a CPU nobody reads from."""
+    import psutil
+
+    cmd = [sys.executable, "-m", "cfvs_maniskill.eval", *ARGS, "--workers", "2",
+           "--out", str(tmp_path)]  # fmt: skip
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    path = tmp_path / "episodes.jsonl"
+    deadline = time.time() + 300
+    while time.time() < deadline and not (path.exists() and path.read_text().strip()):
+        time.sleep(0.05)
+    workers = [psutil.Process(pid) for pid in _worker_pids(p.pid)]
+    assert p.poll() is None and len(workers) == 2, "no running workers"
+    p.kill()
+    p.wait()
+    gone, alive = psutil.wait_procs(workers, timeout=10)
+    for w in alive:
+        w.kill()
+    assert not alive, f"{len(alive)} workers outlived the killed evaluation by 10 s"
+
+
+@pytest.mark.slow
 def test_a_job_that_kills_every_worker_is_recorded_as_crashed(tmp_path):
     """A job whose worker dies twice (here: an agent that SIGKILLs its own process) is
     recorded as crashed with the signal; the other jobs finish and the run ends. The report

@@ -7,6 +7,9 @@ dead worker but never returns its job, and the run hung."""
 
 from __future__ import annotations
 
+import os
+import threading
+import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -18,8 +21,23 @@ from cfvs_maniskill.eval.jobs import Job
 from cfvs_maniskill.eval.worker import Worker, WorkerConfig
 
 
+def _exit_with_parent(poll_s: float = 0.5) -> None:
+    """End this process as soon as its parent is gone. A parent killed by SIGTERM or SIGKILL
+    runs no clean-up, and its workers would otherwise finish their episode (or, in a hole's
+    first collision build, minutes of CoACD) before their pipe tells them."""
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def _serve(conn, cfg: WorkerConfig) -> None:
     """A worker process: run each job it is sent, send back the record (or the error)."""
+    _exit_with_parent()
     try:
         worker, failed = Worker(cfg), None
     except Exception as e:  # e.g. no renderer: every job would die the same way

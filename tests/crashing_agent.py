@@ -1,15 +1,18 @@
-"""An agent that kills its own process on its first decision, as a SAPIEN segfault or the
-OOM killer would kill an eval worker (tests of the evaluation's crash handling)."""
+"""Agents that kill their own process (as a SAPIEN segfault or the OOM killer would kill an
+eval worker) or never finish a decision: tests of the evaluation's crash handling."""
 
 from __future__ import annotations
 
 import os
 import signal
+import time
 
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 
 
 class CrashingAgent(Agent):
+    """Kills its own process on its first decision."""
+
     obs_mode = "state"  # no camera: a worker starts without compiling shaders
 
     def __init__(self, task):
@@ -18,3 +21,17 @@ class CrashingAgent(Agent):
     def act(self, observation: Observation) -> Action:
         os.kill(os.getpid(), signal.SIGKILL)
         return Action.give_up("unreachable")
+
+
+class StuckAgent(Agent):
+    """An agent whose first decision takes ten minutes, as a worker stuck in a long
+    computation would (tests that a killed evaluation does not leave it running)."""
+
+    obs_mode = "state"
+
+    def __init__(self, task):
+        self.task = task
+
+    def act(self, observation: Observation) -> Action:
+        time.sleep(600)
+        return Action.give_up("woke up")

@@ -95,19 +95,27 @@ def test_a_killed_worker_is_replaced_and_its_job_retried(reference, tmp_path):
 
 @pytest.mark.slow
 def test_workers_end_when_the_evaluation_is_killed(tmp_path):
-    """The evaluation SIGKILLed mid-run (no clean-up runs): its workers exit by themselves
-    within seconds instead of finishing their episodes on a CPU nobody reads from."""
+    """The evaluation SIGKILLed (no clean-up runs) while its workers are deep in a job that
+    takes ten minutes: they exit by themselves within seconds instead of running on."""
     import psutil
 
-    cmd = [sys.executable, "-m", "cfvs_maniskill.eval", *ARGS, "--workers", "2",
+    cmd = [sys.executable, "-m", "cfvs_maniskill.eval", "--tasks", "PegInsert3DoF",
+           "--agents", "tests.crashing_agent:StuckAgent", "--objects", "cuboid_test_1",
+           "--init-errors", "small", "--episodes-per-object", "2", "--workers", "2",
            "--out", str(tmp_path)]  # fmt: skip
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    path = tmp_path / "episodes.jsonl"
     deadline = time.time() + 300
-    while time.time() < deadline and not (path.exists() and path.read_text().strip()):
-        time.sleep(0.05)
-    workers = [psutil.Process(pid) for pid in _worker_pids(p.pid)]
-    assert p.poll() is None and len(workers) == 2, "no running workers"
+    workers: list = []
+    while time.time() < deadline and p.poll() is None:
+        workers = [psutil.Process(pid) for pid in _worker_pids(p.pid)]
+        # Both stuck in the agent's decision: asleep, having used their start-up CPU.
+        if len(workers) == 2 and all(w.status() == psutil.STATUS_SLEEPING for w in workers):
+            cpu = [w.cpu_times().user for w in workers]
+            time.sleep(2)
+            if all(w.cpu_times().user - c < 0.05 for w, c in zip(workers, cpu, strict=True)):
+                break
+        time.sleep(0.5)
+    assert p.poll() is None and len(workers) == 2, "no workers in their job"
     p.kill()
     p.wait()
     gone, alive = psutil.wait_procs(workers, timeout=10)

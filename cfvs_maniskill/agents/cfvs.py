@@ -44,6 +44,7 @@ from cfvs_maniskill.perception.clouds import (
 )
 from cfvs_maniskill.perception.opening import MIN_LEVEL_POINTS, face_height, fit_opening
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
+from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_from_table
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
 
@@ -117,6 +118,10 @@ class CFVSConfig:
     nearest the tool's own whose camera has a clear line of sight to the opening from the
     pre-insertion pose (perception/view.py; the coarse cloud says what stands over the
     face). False: always the nearest."""
+    table_calibration: bool = True
+    """Correct the camera's depth scale and two of its mount angles once per episode, from
+    the table plane in the coarse view, whose height the robot knows
+    (perception/table_calibration.py). False: the cloud as the camera reports it."""
     weights_dir: Path = WEIGHTS_DIR
 
     def __post_init__(self) -> None:
@@ -165,6 +170,7 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     "round_ring": ("rim_square_ring", "a round rim ring beyond a square opening's corners"),
     "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
     "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
+    "no_table_calibration": ("table_calibration", "the cloud as reported, not set by the table"),
 }
 """`cfvs_<name>`: CFVS with one component changed (the switch, then what it says)."""
 
@@ -222,9 +228,11 @@ class CFVSAgent(Agent):
         self.stage = "coarse"
         self.fine_steps = 0
         self.had_face = False
+        self.correction = IDENTITY
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
+        self.correction = IDENTITY  # the camera's errors change with the episode
         self.had_face = False  # whether any fine estimate had its face seen round it
         self.phase, self.estimate = "", None
         # Point subsets are random; seeded per episode, so the same episode repeats exactly.
@@ -345,10 +353,21 @@ class CFVSAgent(Agent):
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return constrain(self.task, T, ref)
 
+    def calibrated(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+        """The cloud with the episode's table calibration applied (measured on the coarse
+        view, where most of the table is in sight)."""
+        if not self.cfg.table_calibration:
+            return xyzw
+        camera = tcp.copy()  # the tool's axes serve: the camera is fixed to the tool
+        camera[:3, 3] = tcp[:3, :3] @ camera_in_tcp() + tcp[:3, 3]
+        if self.stage == "coarse":
+            self.correction = correction_from_table(xyzw, camera) or IDENTITY
+        return self.correction.apply_xyzw(xyzw, camera)
+
     # ------------------------------------------------------------------ decisions
     def act(self, observation: Observation) -> Action:
-        xyzw = observation.obs["pointcloud"]["xyzw"][0].cpu().numpy()
         tcp = observation.tcp_pose
+        xyzw = self.calibrated(observation.obs["pointcloud"]["xyzw"][0].cpu().numpy(), tcp)
         if self.stage == "coarse":
             pts = object_points(xyzw, tcp, self.peg)
             H = self.estimate_hole(xyzw, tcp, pts)

@@ -18,6 +18,7 @@ from cfvs_maniskill.sensing.floor import (
     depth_residuals,
     hand_eye_residuals,
     profile_floor_samples,
+    table_calibrations,
 )
 from cfvs_maniskill.sensing.model import SensorModel, mount_errors
 from cfvs_maniskill.sensing.profile import load_profile
@@ -192,6 +193,36 @@ def test_the_floor_adds_the_depth_cameras_errors():
     full = profile_floor_samples(REALISTIC, 2000, seed=0)
     hand_eye = hand_eye_residuals(mount_errors(0.0015, 0.5, np.random.default_rng(0), 2000))
     assert np.percentile(full[:, 0], 90) > np.percentile(hand_eye[:, 0], 90) + 0.0003
+
+
+def test_the_table_calibration_takes_the_depth_scale_and_the_tilt_out_of_the_floor():
+    """Calibrated against the table, a pure depth-scale error leaves nothing; a mount turn
+    about axes across the (vertical) tool leaves no tilt; with the realistic profile's
+    errors the floor's p90 falls, but not below what the table cannot see (the hand-eye
+    translation)."""
+    n = 50
+    none = dict(
+        scale=np.ones(n), offset=np.zeros(n), focal_ratio=np.ones(n), principal=np.zeros((n, 2))
+    )
+    eye = np.tile(np.eye(4), (n, 1, 1))
+    assert np.allclose(table_calibrations(eye, none, 447.0, 0.27), np.eye(3), atol=1e-9)
+    scaled = dict(none, scale=np.linspace(0.98, 1.02, n))
+    K = table_calibrations(eye, scaled, 447.0, 0.27)
+    assert depth_residuals(eye, scaled, 447.0)[:, 0].max() > 0.001
+    assert depth_residuals(eye, scaled, 447.0, K)[:, 0].max() < 1e-6
+    turns = mount_errors(0.0, 1.0, np.random.default_rng(1), n)
+    assert hand_eye_residuals(turns)[:, 1].max() > 0.5
+    assert (
+        depth_residuals(turns, none, 447.0, table_calibrations(turns, none, 447.0, 0.27))[
+            :, 1
+        ].max()
+        < 1e-3
+    )
+    trusting = profile_floor_samples(REALISTIC, 2000, seed=0)
+    calibrated = profile_floor_samples(REALISTIC, 2000, seed=0, table_height=0.27)
+    translation = hand_eye_residuals(mount_errors(0.0015, 0.0, np.random.default_rng(0), 2000))
+    p90 = [np.percentile(x[:, 0], 90) for x in (trusting, calibrated, translation)]
+    assert p90[0] - 0.0005 > p90[1] > p90[2]
 
 
 def test_realistic_camera_has_the_d405_field_of_view(make_env):

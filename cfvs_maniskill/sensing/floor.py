@@ -15,6 +15,10 @@ The depth camera's own calibration errors add to it (`depth_residuals`): a depth
 offset move the hole along its ray (at the pre-insertion view the ray is oblique, so part
 of that is lateral), and focal and principal-point errors turn and stretch the rays. The
 perceived point is P(p); the servo ends where C P((C M)^-1 H) = D, so H = C M P^-1(C^-1 D).
+
+A robot that calibrates its camera against the table (perception/table_calibration.py)
+applies K = s Q, fitted to the table as P shows it from the coarse view, to what it sees:
+then H = C M P^-1(K^-1 C^-1 D) (`calibrated_floor`).
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import tyro
+from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.robots.poses import flange_pose
@@ -73,15 +78,66 @@ def unperceive(p: np.ndarray, scale, offset, focal_ratio, principal, focal_px: f
     return true @ _SAPIEN_TO_CV
 
 
-def depth_residuals(mounts: np.ndarray, depth: dict, focal_px: float) -> np.ndarray:
+def perceive(p: np.ndarray, scale, offset, focal_ratio, principal, focal_px: float):
+    """(n, k, 3) true points (SAPIEN camera frame) -> where the camera reports them: the
+    inverse of `unperceive`, per row of (n,) errors."""
+    q = p @ _SAPIEN_TO_CV.T
+    k = focal_ratio[:, None, None]
+    ray = q[..., :2] / q[..., 2:3] * k + principal[:, None, :] * k / focal_px
+    z = q[..., 2:3] * scale[:, None, None] + offset[:, None, None]
+    return np.concatenate([ray * z, z], axis=-1) @ _SAPIEN_TO_CV
+
+
+def table_calibrations(
+    mounts: np.ndarray, depth: dict, focal_px: float, camera_height: float
+) -> np.ndarray:
+    """(n, 3, 3) corrections K (camera frame) the table calibration finds from a coarse view
+    with the tool pointing straight down and the camera `camera_height` above the table:
+    the plane fitted to the table as the camera reports it, turned upright and scaled onto
+    its known height about the camera (perception/table_calibration.py, without noise)."""
+    C = camera_in_tip()
+    tip = np.eye(4)
+    tip[:3, :3] = np.diag([1.0, -1.0, -1.0])  # tool z down
+    tip[2, 3] = camera_height + C[2, 3]  # the camera's centre at camera_height
+    believed = tip @ C
+    g = np.linspace(-0.12, 0.12, 9)
+    X = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2) + believed[:2, 3]
+    X = np.column_stack([X, np.zeros(len(X)), np.ones(len(X))])  # table points, world
+    true_cam = np.linalg.inv(believed[None] @ mounts)  # world -> the true camera frame
+    q = np.einsum("nij,kj->nki", true_cam, X)[..., :3]
+    args = (depth["scale"], depth["offset"], depth["focal_ratio"], depth["principal"], focal_px)
+    seen = perceive(q, *args)  # reported, believed camera frame
+    mean = seen.mean(axis=1, keepdims=True)
+    normal = np.linalg.svd(seen - mean)[2][:, 2]  # least squares plane, camera frame
+    up = np.linalg.inv(believed)[:3, :3] @ [0.0, 0.0, 1.0]  # world up, camera frame
+    normal *= np.sign(normal @ up)[:, None]
+    reported = -np.sum(normal * mean[:, 0], axis=1)  # the camera's distance from it
+    return (camera_height / reported)[:, None, None] * _turns(normal, up)
+
+
+def _turns(normals: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) shortest turns taking each of `normals` onto `up`."""
+    axis = np.cross(normals, up)
+    angle = np.arctan2(np.linalg.norm(axis, axis=1), normals @ up)
+    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+    return Rotation.from_rotvec(axis * angle[:, None]).as_matrix()
+
+
+def depth_residuals(
+    mounts: np.ndarray, depth: dict, focal_px: float, calibration: np.ndarray | None = None
+) -> np.ndarray:
     """hand_eye_residuals with the depth camera's errors too: `depth` holds (n,) arrays
-    scale, offset, focal_ratio and (n, 2) principal (sensor pixels)."""
+    scale, offset, focal_ratio and (n, 2) principal (sensor pixels); `calibration`, the
+    (n, 3, 3) corrections K the robot applies to what its camera reports."""
     C = camera_in_tip()
     Cinv = np.linalg.inv(C)
     D = pre_insertion_hole()
     believed = Cinv @ D  # where the camera must see the hole, its frame
     origin = np.repeat(believed[None, :3, 3], len(mounts), axis=0)
     tip = origin + 0.01 * believed[:3, 2]  # a point 10 mm along the hole axis
+    if calibration is not None:  # what the camera must report for K to put it there
+        Kinv = np.linalg.inv(calibration)
+        origin, tip = np.einsum("nij,nj->ni", Kinv, origin), np.einsum("nij,nj->ni", Kinv, tip)
     args = (depth["scale"], depth["offset"], depth["focal_ratio"], depth["principal"], focal_px)
     o, a = unperceive(origin, *args), unperceive(tip, *args)
     H = np.repeat(believed[None], len(mounts), axis=0)
@@ -114,15 +170,22 @@ def floor_samples(translation: float, rotation_deg: float, n: int, seed: int) ->
     return hand_eye_residuals(mounts)
 
 
-def profile_floor_samples(profile: SensorProfile, n: int, seed: int) -> np.ndarray:
+def profile_floor_samples(
+    profile: SensorProfile, n: int, seed: int, table_height: float | None = None
+) -> np.ndarray:
     """(n, 2) residuals over a profile's hand-eye and depth-camera errors, drawn within its
-    bounds as the env draws them (uniform for the depth camera's)."""
+    bounds as the env draws them (uniform for the depth camera's); with `table_height`, for
+    a robot that calibrates against the table seen from that camera height."""
     he, d = profile.hand_eye, profile.depth
     mounts = mount_errors(he.translation, he.rotation_deg, np.random.default_rng(seed), n)
-    if d.model != "stereo":
+    stereo = d.model == "stereo"
+    if not stereo and table_height is None:
         return hand_eye_residuals(mounts)
     u = np.random.default_rng([seed, 1]).uniform(-1.0, 1.0, (n, 5))
-    return depth_residuals(mounts, depth_errors(d, u), d.focal_px)
+    depth = depth_errors(d, u if stereo else np.zeros((n, 5)))  # iid: no camera errors
+    focal_px = d.focal_px if stereo else 1.0  # any focal: no principal-point error
+    K = None if table_height is None else table_calibrations(mounts, depth, focal_px, table_height)
+    return depth_residuals(mounts, depth, focal_px, K)
 
 
 @functools.cache
@@ -160,14 +223,18 @@ class FloorArgs:
     """Mount errors drawn per profile."""
     seed: int = 0
     """Seed of the draws."""
+    table_view_height: float = 0.27
+    """The camera's height above the table in the coarse view, for the table calibration's
+    column (the first views of 16 D405 6-DoF episodes: 185-332 mm, median 270)."""
 
 
 def main(args: FloorArgs) -> None:
     print(
         "| profile | hand-eye error | depth scale / intrinsics error "
-        "| lateral p50 / p90 (hand-eye only) | tilt p50 / p90 |"
+        "| lateral p50 / p90 (hand-eye only) | tilt p50 / p90 "
+        "| calibrated on the table: lateral, tilt p50 / p90 |"
     )
-    print("|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|")
     for name in args.sensors:
         profile = load_profile(name)
         he, d = profile.hand_eye, profile.depth
@@ -176,6 +243,8 @@ def main(args: FloorArgs) -> None:
         lat = 1000 * np.percentile(s[:, 0], [50, 90])
         lat_he = 1000 * np.percentile(h[:, 0], [50, 90])
         tilt = np.percentile(s[:, 1], [50, 90])
+        t = profile_floor_samples(profile, args.samples, args.seed, args.table_view_height)
+        t_lat, t_tilt = 1000 * np.percentile(t[:, 0], [50, 90]), np.percentile(t[:, 1], [50, 90])
         depth = "-"
         if d.model == "stereo":
             depth = (
@@ -185,7 +254,8 @@ def main(args: FloorArgs) -> None:
         print(
             f"| `{name}` | {1000 * he.translation:g} mm / {he.rotation_deg:g} deg | {depth} "
             f"| {lat[0]:.2f} / {lat[1]:.2f} mm ({lat_he[0]:.2f} / {lat_he[1]:.2f}) "
-            f"| {tilt[0]:.2f} / {tilt[1]:.2f} deg |"
+            f"| {tilt[0]:.2f} / {tilt[1]:.2f} deg "
+            f"| {t_lat[0]:.2f} / {t_lat[1]:.2f} mm, {t_tilt[0]:.2f} / {t_tilt[1]:.2f} deg |"
         )
 
 

@@ -157,9 +157,10 @@ def test_records_carry_the_true_residual_after_each_move(make_env, tmp_path):
     rec = {**r.to_json(), "label": "oracle"}
     text = residuals.table([rec, {**rec, "sensor": "realistic", "move_residuals": [[3.0, 2.0]]}])
     assert "| PegInsert6DoF | oracle | realistic | 1 | 1 | 3.0 / 3.0 | 2.0 / 2.0 |" in text
-    # The realistic profile's hand-eye floor is quoted beside it (sensing/floor.py), the
-    # ideal profile (no hand-eye error) has none.
-    assert "hand-eye floor" in text and "`realistic` 2.86" in text and "`ideal`" not in text
+    # The realistic profile's hand-eye floor is quoted beside it (sensing/floor.py), trusting
+    # the calibration and calibrated on the table; the ideal profile (no errors) has none.
+    assert "hand-eye floor" in text and "`ideal`" not in text
+    assert "`realistic` 2.86 mm / 0.56 deg (1.95 / 0.22)" in text
     assert residuals.plot([rec], tmp_path, agent="oracle").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -188,10 +188,18 @@ def profile_floor_samples(
     return depth_residuals(mounts, depth, focal_px, K)
 
 
+TABLE_VIEW_HEIGHT = 0.27
+"""The camera's height above the table in the coarse view, for the table calibration's
+floor (the first views of 16 D405 6-DoF episodes: 185-332 mm, median 270)."""
+
+
 @functools.cache
-def floor_p90(sensor: str, samples: int = 20000) -> tuple[float, float] | None:
-    """(lateral mm, tilt deg) p90 of a profile's floor (hand-eye and depth-camera errors);
-    None without either or for a sensor name that is not a loadable profile (old
+def floor_p90(
+    sensor: str, samples: int = 20000, table_view_height: float | None = None
+) -> tuple[float, float] | None:
+    """(lateral mm, tilt deg) p90 of a profile's floor (hand-eye and depth-camera errors;
+    with `table_view_height`, for a robot calibrated on the table seen from there); None
+    without either error or for a sensor name that is not a loadable profile (old
     records)."""
     try:
         profile = load_profile(sensor)
@@ -206,7 +214,7 @@ def floor_p90(sensor: str, samples: int = 20000) -> tuple[float, float] | None:
     )
     if he.translation == 0 and he.rotation_deg == 0 and not any(calibration):
         return None
-    s = profile_floor_samples(profile, samples, seed=0)
+    s = profile_floor_samples(profile, samples, seed=0, table_height=table_view_height)
     return float(1000 * np.percentile(s[:, 0], 90)), float(np.percentile(s[:, 1], 90))
 
 
@@ -223,9 +231,9 @@ class FloorArgs:
     """Mount errors drawn per profile."""
     seed: int = 0
     """Seed of the draws."""
-    table_view_height: float = 0.27
-    """The camera's height above the table in the coarse view, for the table calibration's
-    column (the first views of 16 D405 6-DoF episodes: 185-332 mm, median 270)."""
+    table_view_height: float = TABLE_VIEW_HEIGHT
+    """The camera's height above the table in the coarse view (the table calibration's
+    column)."""
 
 
 def main(args: FloorArgs) -> None:

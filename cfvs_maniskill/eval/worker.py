@@ -7,6 +7,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+from cfvs_maniskill import provenance
 from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
 from cfvs_maniskill.eval.jobs import Job
 
@@ -33,6 +34,9 @@ class Worker:
         # than threads here, and the thread count changes float sums (point clouds, nets),
         # so with it fixed an episode's record does not depend on --workers.
         torch.set_num_threads(1)
+        # The code version as this process loads the code, not minutes later at its first
+        # record (a first hole build), when the checkout may have moved on.
+        provenance.code_version()
         self.cfg = cfg
         self.envs: dict[tuple, object] = {}
         self.sessions: dict[tuple[str, str, str], object] = {}

@@ -361,7 +361,7 @@ def test_report_check_names_mixed_stale_and_crashed_cells(reference, tmp_path):
     readme.write_text("<!-- report:headline begin -->\n<!-- report:headline end -->\n")
     check = ["cfvs_maniskill.report", str(results), "--check", "--readme", str(readme)]
     r = run_cli(*check)
-    assert r.returncode == 1 and "headline table is not what the records give" in r.stdout
+    assert r.returncode == 1 and "headline tables are not what the records give" in r.stdout
     assert run_cli("cfvs_maniskill.report", str(results), "--readme", str(readme),
                    "--no-videos", "--out", str(tmp_path / "rep")).returncode == 0  # fmt: skip
     r = run_cli(*check)
@@ -612,3 +612,24 @@ def test_a_failed_insertion_is_named_by_where_the_peg_ended(metrics, expected):
     from cfvs_maniskill.episode import failure_reason
 
     assert failure_reason(metrics) == expected
+
+
+def test_the_readme_gets_a_table_for_the_other_cameras_where_it_has_its_markers():
+    """The d435 and textured profiles fill their own table (`report:headline-cameras`), and
+    a README without those markers gets only the main one."""
+    from cfvs_maniskill.report.tables import fill_headlines
+
+    recs = [
+        {"label": "cfvs", "task": "PegInsert3DoF", "sensor": s, "init": i, "success": ok}
+        for s, ok in (("ideal", True), ("d435", False), ("textured", True))
+        for i in ("small", "large")
+    ]
+    main = "<!-- report:headline begin -->\n<!-- report:headline end -->\n"
+    cameras = "<!-- report:headline-cameras begin -->\n<!-- report:headline-cameras end -->\n"
+    text = fill_headlines(main + cameras, recs, "README.md")
+    first, second = text.split("<!-- report:headline-cameras begin -->")
+    assert "| 3DoF ideal | 3DoF realistic |" in first and "d435" not in first
+    assert "| cfvs | 1.00 / 1.00 | - / - | - / - |" in first
+    assert "| 3DoF d435 | 3DoF textured |" in second
+    assert "| cfvs | 0.00 / 0.00 | 1.00 / 1.00 | - / - |" in second
+    assert fill_headlines(main, recs, "README.md").count("| cfvs |") == 1

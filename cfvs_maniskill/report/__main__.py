@@ -30,11 +30,12 @@ class ReportArgs:
     """Extra hole-object folders or files the results used: their records are reported
     (without, records on objects outside the default library are left out) and replayed."""
     readme: Path | None = None
-    """Also fill the headline table (main agents, tasks and sensor profiles, 15 / 30 cm)
-    into this file between its `<!-- report:headline begin/end -->` markers."""
+    """Also fill the headline tables (main agents, tasks and sensor profiles, 15 / 30 cm)
+    into this file between its `<!-- report:headline begin/end -->` markers (and, where it
+    has them, `report:headline-cameras`: the d435 and textured profiles)."""
     check: bool = False
     """Write nothing; exit 1 when a headline cell comes from mixed, stale or crashed records
-    (report/trace.py) or when --readme's headline table is not what the records give."""
+    (report/trace.py) or when --readme's headline tables are not what the records give."""
 
 
 def check(records: list[dict], crashed: list[dict], readme: Path | None) -> int:
@@ -49,9 +50,8 @@ def check(records: list[dict], crashed: list[dict], readme: Path | None) -> int:
             problems.append(f"{label} {task} {sensor} {init}: {status}: {'; '.join(reasons)}")
     if readme is not None:
         text = readme.read_text()
-        want = tables.replace_marked(text, "headline", tables.table_headline(records), str(readme))
-        if want != text:
-            problems.append(f"{readme}: the headline table is not what the records give")
+        if tables.fill_headlines(text, records, str(readme)) != text:
+            problems.append(f"{readme}: the headline tables are not what the records give")
     for p in problems:
         print(p)
     n = len(tables.headline_cells(records))
@@ -84,12 +84,7 @@ def main(args: ReportArgs) -> int:
     readme_text = None
     if args.readme is not None:
         try:
-            readme_text = tables.replace_marked(
-                args.readme.read_text(),
-                "headline",
-                tables.table_headline(records),
-                str(args.readme),
-            )
+            readme_text = tables.fill_headlines(args.readme.read_text(), records, str(args.readme))
         except (OSError, ValueError) as e:
             print(f"error: {e}", file=sys.stderr)
             return 2
@@ -150,7 +145,7 @@ def main(args: ReportArgs) -> int:
     )
     if readme_text is not None:
         args.readme.write_text(readme_text)
-        print(f"filled the headline table into {args.readme}")
+        print(f"filled the headline tables into {args.readme}")
     print(f"wrote {args.out / 'README.md'} and {len(pngs)} plots ({len(records)} episodes)")
     return 0
 

@@ -169,15 +169,18 @@ HEADLINE_AGENTS = ("cfvs", "cfvs_plain", "3drhd", "icp_kpts", "icp", "kovis", "o
 """The README's rows: CFVS (with and without the compliant search), the baselines, the
 ceiling."""
 HEADLINE_TASKS = ("PegInsert3DoF", "PegInsert4DoF", "PegInsert6DoF")
-HEADLINE_SENSORS = ("ideal", "realistic")
+HEADLINES = {"headline": ("ideal", "realistic"), "headline-cameras": ("d435", "textured")}
+"""The README's marked tables and their sensor profiles: the paper's and the D405's, then
+the other cameras (an active-stereo D435, a D405 on textured parts)."""
 
 
 def headline_cells(records: list[dict]) -> dict[tuple, list[dict]]:
     """(agent, task, sensor, initial error) -> the records of that headline cell."""
+    sensors = {s for group in HEADLINES.values() for s in group}
     cells: dict[tuple, list[dict]] = defaultdict(list)
     for r in records:
         head = r["label"] in HEADLINE_AGENTS and r["task"] in HEADLINE_TASKS
-        if head and r["sensor"] in HEADLINE_SENSORS:
+        if head and r["sensor"] in sensors:
             cells[(r["label"], r["task"], r["sensor"], r["init"])].append(r)
     return cells
 
@@ -206,20 +209,18 @@ def table_provenance(records: list[dict], crashed: list[dict]) -> str:
     return "\n".join(out)
 
 
-def table_headline(records: list[dict]) -> str:
+def table_headline(records: list[dict], sensors: tuple[str, ...] = HEADLINES["headline"]) -> str:
     """Success at 15 / 30 cm per agent, task and sensor profile, the main agents only (the
-    README's table; everything else is in the report)."""
-    head = " | ".join(
-        f"{t[len('PegInsert') :]} {s}" for t in HEADLINE_TASKS for s in HEADLINE_SENSORS
-    )
-    out = [f"| agent | {head} |", "|---|" + "---|" * len(HEADLINE_TASKS) * len(HEADLINE_SENSORS)]
+    README's tables; everything else is in the report)."""
+    head = " | ".join(f"{t[len('PegInsert') :]} {s}" for t in HEADLINE_TASKS for s in sensors)
+    out = [f"| agent | {head} |", "|---|" + "---|" * len(HEADLINE_TASKS) * len(sensors)]
     for label in HEADLINE_AGENTS:
-        recs = [r for r in records if r["label"] == label]
+        recs = [r for r in records if r["label"] == label and r["sensor"] in sensors]
         if not recs:
             continue
         cells = []
         for t in HEADLINE_TASKS:
-            for s in HEADLINE_SENSORS:
+            for s in sensors:
                 rates = []
                 for i in INITS:
                     m = [r for r in recs if r["task"] == t and r["sensor"] == s and r["init"] == i]
@@ -227,6 +228,15 @@ def table_headline(records: list[dict]) -> str:
                 cells.append(" / ".join(rates))
         out.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(out)
+
+
+def fill_headlines(text: str, records: list[dict], where: str) -> str:
+    """`text` with every headline table whose markers it has filled from `records`; the
+    first (`headline`) must be there (ValueError naming `where`)."""
+    for name, sensors in HEADLINES.items():
+        if name == "headline" or f"<!-- report:{name} begin -->" in text:
+            text = replace_marked(text, name, table_headline(records, sensors), where)
+    return text
 
 
 def replace_marked(text: str, name: str, block: str, where: str) -> str:

@@ -43,7 +43,7 @@ def load_records(
     that agent, e.g. results/cfvs_plain) and `init` (small / large).
 
     Crashed jobs (no outcome) go to `crashed` instead. Records on objects outside the
-    default library and `assets` (e.g. the CAD parts in results/cad_parts_v2 without
+    default library and `assets` (e.g. the CAD parts in results/cad_parts_v3 without
     `--assets assets/cad_parts`) are left out: a table averages over the objects it names.
     """
     known = set(load_library(assets).specs)

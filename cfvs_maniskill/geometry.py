@@ -80,6 +80,15 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
 
 
+def shortest_turns(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) the smallest rotations taking unit vectors `a` (..., 3) onto `b`."""
+    axis = np.cross(a, b)
+    sin = np.linalg.norm(axis, axis=-1)
+    angle = np.arctan2(sin, np.sum(a * b, axis=-1))
+    axis = axis / np.maximum(sin, 1e-12)[..., None]
+    return Rotation.from_rotvec(axis * angle[..., None]).as_matrix()
+
+
 def frame_with_z(z: np.ndarray, x_hint: np.ndarray) -> np.ndarray:
     """Rotation whose z axis is `z` and whose x axis is as close as possible to `x_hint`."""
     z = z / np.linalg.norm(z)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from cfvs_maniskill import geometry as G
 from cfvs_maniskill.perception.clouds import fit_table, valid_world_points
 
 MIN_TABLE_POINTS = 2000
@@ -69,9 +70,7 @@ def correction_from_table(
     table is in view or the plane found is too far off to be the table's."""
     world = valid_world_points(xyzw)
     table = fit_table(world, min_points=MIN_TABLE_POINTS)
-    if table.sigma <= 0 or np.count_nonzero(np.abs(table.height(world)) < table.margin) < (
-        MIN_TABLE_POINTS
-    ):
+    if np.count_nonzero(np.abs(table.height(world)) < table.margin) < MIN_TABLE_POINTS:
         return None
     c = camera[:3, 3].astype(np.float64)
     up = np.array([0.0, 0.0, 1.0])
@@ -80,11 +79,8 @@ def correction_from_table(
     known = float(c[2] - table_height)
     if reported <= 0 or known <= 0 or abs(known / reported - 1.0) > MAX_SCALE_ERROR:
         return None
-    # The world turn taking the reported normal up, then into the camera's frame.
-    axis = np.cross(n, up)
-    angle = np.arctan2(np.linalg.norm(axis), n @ up)
-    if np.degrees(angle) > MAX_TILT_DEG:
+    if G.angle_deg(n, up) > MAX_TILT_DEG:
         return None
-    turn = Rotation.from_rotvec(axis / max(np.linalg.norm(axis), 1e-12) * angle).as_matrix()
-    R = camera[:3, :3].astype(np.float64)
+    turn = G.shortest_turns(n, up)  # the world turn taking the reported normal up ...
+    R = camera[:3, :3].astype(np.float64)  # ... in the camera's frame
     return CameraCorrection(R.T @ turn @ R, known / reported)

@@ -18,7 +18,7 @@ perceived point is P(p); the servo ends where C P((C M)^-1 H) = D, so H = C M P^
 
 A robot that calibrates its camera against the table (perception/table_calibration.py)
 applies K = s Q, fitted to the table as P shows it from the coarse view, to what it sees:
-then H = C M P^-1(K^-1 C^-1 D) (`calibrated_floor`).
+then H = C M P^-1(K^-1 C^-1 D) (`table_calibrations`, `depth_residuals(..., calibration)`).
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import tyro
-from scipy.spatial.transform import Rotation
 
+from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.robots.poses import flange_pose
 from cfvs_maniskill.sensing.model import depth_errors, mount_errors
@@ -112,15 +112,7 @@ def table_calibrations(
     up = np.linalg.inv(believed)[:3, :3] @ [0.0, 0.0, 1.0]  # world up, camera frame
     normal *= np.sign(normal @ up)[:, None]
     reported = -np.sum(normal * mean[:, 0], axis=1)  # the camera's distance from it
-    return (camera_height / reported)[:, None, None] * _turns(normal, up)
-
-
-def _turns(normals: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) shortest turns taking each of `normals` onto `up`."""
-    axis = np.cross(normals, up)
-    angle = np.arctan2(np.linalg.norm(axis, axis=1), normals @ up)
-    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
-    return Rotation.from_rotvec(axis * angle[:, None]).as_matrix()
+    return (camera_height / reported)[:, None, None] * G.shortest_turns(normal, up)
 
 
 def depth_residuals(

@@ -272,10 +272,13 @@ def test_unknown_sensor_exits_2_listing_the_profiles(tmp_path):
 @pytest.mark.parametrize("obs_mode", ["rgbd", "pointcloud"])
 def test_realistic_observations_round_trip_through_the_state(make_env, obs_mode):
     """Save in episode A, reset into B, restore A: the realistic sensor's readings (noise,
-    edges, hand-eye error, camera mount) are A's again. PhysX restores link poses to the
-    last bit only (tests/test_maniskill_conformance.py), and a last-bit change can move a
-    depth across a quantisation step or an incidence across the grazing limit: so at most
-    0.5% of the pixels may differ, by a step or a dropout; all others are exact."""
+    edges, hand-eye error, camera mount) are A's again. A restored state is the same state
+    every time, so two restorations read the same images to the last bit. Against the
+    reading before the save they agree but for the pixels a last-bit change moves: PhysX
+    restores link poses to the last bit only (the arm's pose from its joints, not from the
+    integration), a silhouette pixel can flip, and the stereo model's edge, incidence and
+    occlusion tests spread it to neighbours (0-1.6% of the points, measured), whereas a
+    noise stream or mount not restored changes nearly every point."""
     from mani_skill.utils import common
 
     from tests.test_maniskill_conformance import assert_obs_equal
@@ -286,18 +289,25 @@ def test_realistic_observations_round_trip_through_the_state(make_env, obs_mode)
     env.step(env.action_space.sample())
     state = u.get_state_dict()
     obs, mount, bias = u.get_obs(), u.sensing.mount.copy(), u.sensing.wrench_bias.copy()
-    env.reset(seed=8, options={"object": "cuboid_test_2"})
-    assert not np.array_equal(mount, u.sensing.mount)
-    u.set_state_dict(state)
-    np.testing.assert_array_equal(mount, u.sensing.mount)
-    np.testing.assert_array_equal(bias, u.sensing.wrench_bias)
-    again = u.get_obs()
+    restored = []
+    for _ in range(2):
+        env.reset(seed=8, options={"object": "cuboid_test_2"})
+        assert not np.array_equal(mount, u.sensing.mount)
+        u.set_state_dict(state)
+        np.testing.assert_array_equal(mount, u.sensing.mount)
+        np.testing.assert_array_equal(bias, u.sensing.wrench_bias)
+        restored.append(common.flatten_dict_keys(common.to_numpy(u.get_obs())))
+    first, again = restored
+    assert first.keys() == again.keys()
+    for key in first:
+        np.testing.assert_array_equal(first[key], again[key], err_msg=key)
     images = {"pointcloud/xyzw", "sensor_data/wrist_camera/depth"}
-    a, b = (common.flatten_dict_keys(common.to_numpy(x)) for x in (obs, again))
+    a = common.flatten_dict_keys(common.to_numpy(obs))
+    b = dict(first)
     for key in images & a.keys():
         x, y = a.pop(key), b.pop(key)
         differ = ~np.isclose(x.astype(np.float64), y.astype(np.float64), rtol=0, atol=1e-6)
-        assert differ.reshape(-1, x.shape[-1]).any(-1).mean() <= 0.005, key
+        assert differ.reshape(-1, x.shape[-1]).any(-1).mean() <= 0.1, key
     assert_obs_equal(a, b)
 
 

@@ -59,3 +59,27 @@ def test_the_oracle_solves_a_scene_whose_first_arm_branch_dipped_into_the_table(
     world = session.executor.planner.world
     gap, _ = world.tree.query(env.unwrapped.object_surface())
     assert gap.max() <= np.sqrt(3) / 2 * world.voxel
+
+
+def test_a_path_check_finds_the_first_configuration_and_link_one_at_a_time_would(make_env):
+    """The batched check of a path (first_touch) against `touches` configuration by
+    configuration: random arms near home among random points, with and without a margin."""
+    from scipy.spatial import cKDTree
+
+    env = make_env("PegInsert6DoF-v1", obs_mode="state")
+    u = env.unwrapped
+    env.reset(seed=1)
+    home = u.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64)
+    rng = np.random.default_rng(0)
+    seen = set()
+    for trial in range(12):
+        points = rng.uniform([0.2, -0.4, 0.0], [0.8, 0.4, 0.3], (rng.integers(5, 400), 3))
+        tree = cKDTree(points)
+        qs = [home + rng.normal(0, 0.3, len(home)) for _ in range(60)]
+        margin = (0.0, 0.01)[trial % 2]
+        one_by_one = [u.collision.touches(q, points, tree, margin) for q in qs]
+        seen.update(one_by_one)
+        for start in range(0, 60, 7):
+            expect = next(((i, n) for i, n in enumerate(one_by_one[start:]) if n is not None), None)
+            assert u.collision.first_touch(qs[start:], points, tree, margin, chunk=8) == expect
+    assert None in seen and len(seen) >= 4, seen  # free arms and several links touching

@@ -81,17 +81,44 @@ class ArmCollision:
         """The name of the first link that comes within `margin` of a known point (`tree`
         over `points`, world frame) or of the table's plane at `table_z`; None if none.
         Links whose name ends in one of `skip` are not checked."""
+        hit = self.first_touch([q], points, tree, margin, table_z, skip)
+        return None if hit is None else hit[1]
+
+    def first_touch(
+        self,
+        qs: list[np.ndarray],
+        points: np.ndarray,
+        tree: cKDTree | None,
+        margin: float,
+        table_z: float = 0.0,
+        skip: tuple[str, ...] = (),
+        chunk: int = 32,
+    ) -> tuple[int, str] | None:
+        """`touches` for configurations in order: (index of the first that touches, its
+        first link's name), or None. Checked `chunk` configurations at a time in one
+        query of the point tree, which is what a path check costs."""
         hulls = [h for h in self.hulls if not h.name.endswith(skip)] if skip else self.hulls
-        poses = self.kinematics.link_poses(q, [h.index for h in hulls])
-        for h, T in zip(hulls, poses, strict=True):
-            R, t = T[:3, :3], T[:3, 3]
-            if h.index not in self.on_table and (h.vertices @ R[2] + t[2]).min() < table_z + margin:
-                return h.name
-            if tree is None:
-                continue
-            near = tree.query_ball_point(R @ h.centre + t, h.radius + margin)
-            if near and h.inside(points[near], T, margin).any():
-                return h.name
+        indices = [h.index for h in hulls]
+        reach = np.array([h.radius + margin for h in hulls])
+        for begin in range(0, len(qs), chunk):
+            poses = np.array(
+                [self.kinematics.link_poses(q, indices) for q in qs[begin : begin + chunk]]
+            )
+            R, t = poses[:, :, :3, :3], poses[:, :, :3, 3]  # (n, links, ...)
+            hit = np.zeros(poses.shape[:2], bool)
+            for k, h in enumerate(hulls):
+                if h.index not in self.on_table:
+                    low = (h.vertices @ R[:, k, 2].T).min(axis=0) + t[:, k, 2]
+                    hit[:, k] = low < table_z + margin
+            if tree is not None:
+                centres = np.einsum("nkij,kj->nki", R, np.array([h.centre for h in hulls])) + t
+                near = tree.query_ball_point(centres, np.broadcast_to(reach, hit.shape))
+                for n, k in zip(*np.nonzero(~hit), strict=True):
+                    if near[n, k]:
+                        hit[n, k] = hulls[k].inside(points[near[n, k]], poses[n, k], margin).any()
+            if hit.any():
+                n, k = np.argwhere(hit)[0]
+                return begin + int(n), hulls[k].name
         return None
 
     def on_arm(self, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:

@@ -456,3 +456,35 @@ def test_ribbed_pocketed_and_narrow_families_and_the_held_out_one(tmp_path, monk
     with pytest.raises(DatasetError, match="--procedural-family: expected one of .*held out"):
         collect(args)
     assert not (tmp_path / "c.h5").exists()
+
+
+def test_grooved_family_cuts_grooves_beside_the_hole_and_is_held_out(tmp_path, monkeypatch):
+    """`grooved` (the successor frozen set's family): V-grooves and slots 3-15 mm deep cut
+    across the face outside the hole's wall, a valid and buildable test object; training
+    never draws it."""
+    import trimesh
+
+    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
+    from cfvs_maniskill.data.shapes import keep_clear
+    from cfvs_maniskill.objects.build import build_geometry
+
+    monkeypatch.setenv("CFVS_CACHE", str(tmp_path))
+    keep = keep_clear("square", 0.004)
+    folder, names = procedural_specs(
+        2, 5, "square", 0.004, 0.045, "grooved", split="test", folder=tmp_path / "g"
+    )
+    lib = load_library([folder])
+    assert not lib.errors
+    for n in names:
+        spec = lib.specs[n]
+        assert spec.split == "test" and spec.body_kind == "mesh"
+        body = trimesh.load(folder / spec.body["file"])
+        hole, top = np.array(spec.hole_frame[0][:2]), spec.hole_frame[0][2]
+        v = body.vertices
+        beside = np.linalg.norm(v[:, :2] - hole, axis=1) > keep
+        floor = beside & (v[:, 2] < top - 0.0029) & (v[:, 2] > top - 0.0151)
+        assert floor.any() and body.convex_hull.volume > body.volume + 1e-7, n
+    build_geometry(lib.specs[names[0]], "square", 0.004, 0.045)  # room for the hole
+    assert "grooved" not in TRAINING_FAMILIES
+    with pytest.raises(ValueError, match="held out of training"):
+        procedural_specs(2, 1, "square", 0.004, 0.045, "grooved")

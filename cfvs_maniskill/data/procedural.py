@@ -7,7 +7,7 @@ wall, a step, a boss) beside the hole, a notch cut out of the body (an edge or a
 corner close to the rim), and holes anywhere their walls allow, not only near the centre.
 
 `data/shapes.py` adds the families `ribs`, `pockets` (and counterbores), `narrow` and the
-held-out `composite`.
+held-out `composite` and `grooved`.
 
 The paper trains on four cuboids; here the networks can also see hundreds of distinct
 bodies. Each body is a normal `assets/holes`-style YAML file (split: train), so it goes
@@ -201,6 +201,7 @@ FAMILIES = {
     "pockets": "k",
     "narrow": "n",
     "composite": "c",
+    "grooved": "g",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}
@@ -279,3 +280,29 @@ def procedural_specs(
         else:
             raise RuntimeError(f"could not draw a valid procedural body for {name}")
     return folder, names
+
+
+def write_frozen_set(here: Path, family: str, seed: int, count: int, title: str) -> None:
+    """Write a frozen generalisation set into folder `here`: `count` bodies of held-out
+    `family` drawn from `seed`, as `gen_<family>_NN.stl` / `.yaml` files (split test) that
+    host both pegs (drawn for the square peg at 4 mm clearance, the widest opening of the
+    default tasks). `title` heads each file."""
+    import shutil
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder, names = procedural_specs(
+            count, seed, "square", 0.004, 0.045, family, split="test", folder=Path(tmp)
+        )
+        for i, n in enumerate(names):
+            doc = yaml.safe_load((folder / f"{n}.yaml").read_text())
+            name = f"gen_{family}_{i:02d}"
+            shutil.copy(folder / doc["body"]["mesh"]["file"], here / f"{name}.stl")
+            doc.update(name=name, hole=["round", "square"], body={"mesh": {"file": f"{name}.stl"}})
+            path = here / f"{name}.yaml"
+            head = f"# {title}: {family} body {i}, seed {seed}.\n"
+            path.write_text(head + yaml.safe_dump(doc, sort_keys=False))
+            spec = parse_spec(doc, path)
+            for peg in ("round", "square"):
+                build_geometry(spec, peg, 0.004, 0.045)  # hosts both pegs
+            print(name, "ok")

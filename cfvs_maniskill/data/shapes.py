@@ -7,7 +7,10 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
 - `narrow`: narrow, tall bodies, the hole near an end or an inner corner;
 - `composite`: an L-, T- or U-shaped outline carrying two or three of the elements above
   plus a boss around the opening. Training never draws it (`TRAINING_FAMILIES`): the
-  frozen generalisation set (`assets/generalisation/`) is made of it.
+  frozen generalisation set (`assets/generalisation/`) is made of it;
+- `grooved`: a box or disc with V-grooves and square slots cut across its face beside the
+  opening, from edge to edge: long straight recessed edges, which no training family has.
+  Held out too: the successor frozen set (`assets/generalisation_grooved/`) is made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -212,11 +215,60 @@ def composite_body(rng, peg, clearance, folder: Path, name: str):
     return _write(mesh, hole, top, folder, name)
 
 
+def add_grooves(rng, mesh, hole, top, keep):
+    """One to three grooves across the whole face beside the hole, each at its own angle:
+    a 90 deg V (6-30 mm wide at the face) or a square slot (6-25 mm wide), 3-15 mm deep.
+    A groove that crosses less than 2 cm of the face (its line beyond a narrow body's side,
+    or clipping a corner) is drawn again."""
+    wanted, cut = int(rng.integers(1, 4)), 0
+    for _ in range(8 * wanted):
+        side = rng.uniform(0, 2 * np.pi)
+        depth = rng.uniform(0.003, min(0.015, 0.4 * top))
+        if rng.random() < 0.5:  # a square bar turned 45 deg about its length: a 90 deg V
+            width = 2 * depth
+            groove = trimesh.creation.box([0.04, 1.0, 0.04])
+            groove.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 4, [0, 1, 0]))
+            groove.apply_transform(trimesh.transformations.rotation_matrix(side, [0, 0, 1]))
+            c = hole + _unit(side) * (keep + width / 2 + rng.uniform(0.002, 0.03))
+            groove.apply_translation([*c, top - depth + 0.02 * np.sqrt(2)])
+            section = depth * depth
+        else:
+            width = rng.uniform(0.006, 0.025)
+            c = hole + _unit(side) * (keep + width / 2 + rng.uniform(0.002, 0.03))
+            groove = box_at([width, 1.0, 2 * depth], [*c, top], side)
+            section = width * depth
+        cut_mesh = _minus(mesh, [groove])
+        if cut_mesh.volume < mesh.volume - 0.02 * section:
+            mesh, cut = cut_mesh, cut + 1
+            if cut == wanted:
+                break
+    return mesh, top
+
+
+def grooved_body(rng, peg, clearance, folder: Path, name: str):
+    """A box or a disc, 5-14 cm tall, grooved across its face beside the hole; a
+    counterbore round the opening a third of the time."""
+    keep = keep_clear(peg, clearance)
+    top = rng.uniform(0.05, 0.14)
+    if rng.random() < 0.5:
+        mesh, hole = _slab(rng, keep, top)
+    else:
+        r = rng.uniform(keep + 0.03, 0.11)
+        mesh = trimesh.creation.cylinder(r, top, 96)
+        mesh.apply_translation([0, 0, top / 2])
+        hole = _unit(rng.uniform(0, 2 * np.pi)) * rng.uniform(0, r - keep)
+    mesh, top = add_grooves(rng, mesh, hole, top, keep)
+    if rng.random() < 1 / 3:
+        mesh, top = add_counterbore(rng, mesh, hole, top, keep)
+    return _write(mesh, hole, top, folder, name)
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
     "narrow": narrow_body,
     "composite": composite_body,
+    "grooved": grooved_body,
 }
-HELD_OUT_FAMILIES = ("composite",)
-"""Never drawn for training: the generalisation set's family."""
+HELD_OUT_FAMILIES = ("composite", "grooved")
+"""Never drawn for training: the frozen generalisation sets' families."""

@@ -18,6 +18,8 @@ never among them. Files are written once per (seed, count, peg) into the cache.
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -287,9 +289,6 @@ def write_frozen_set(here: Path, family: str, seed: int, count: int, title: str)
     `family` drawn from `seed`, as `gen_<family>_NN.stl` / `.yaml` files (split test) that
     host both pegs (drawn for the square peg at 4 mm clearance, the widest opening of the
     default tasks). `title` heads each file."""
-    import shutil
-    import tempfile
-
     with tempfile.TemporaryDirectory() as tmp:
         folder, names = procedural_specs(
             count, seed, "square", 0.004, 0.045, family, split="test", folder=Path(tmp)

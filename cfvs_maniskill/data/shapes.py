@@ -224,17 +224,16 @@ def add_grooves(rng, mesh, hole, top, keep):
     for _ in range(8 * wanted):
         side = rng.uniform(0, 2 * np.pi)
         depth = rng.uniform(0.003, min(0.015, 0.4 * top))
-        if rng.random() < 0.5:  # a square bar turned 45 deg about its length: a 90 deg V
-            width = 2 * depth
+        vee = rng.random() < 0.5
+        width = 2 * depth if vee else rng.uniform(0.006, 0.025)
+        c = hole + _unit(side) * (keep + width / 2 + rng.uniform(0.002, 0.03))
+        if vee:  # a square bar turned 45 deg about its length, its lower edge at the depth
             groove = trimesh.creation.box([0.04, 1.0, 0.04])
             groove.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 4, [0, 1, 0]))
             groove.apply_transform(trimesh.transformations.rotation_matrix(side, [0, 0, 1]))
-            c = hole + _unit(side) * (keep + width / 2 + rng.uniform(0.002, 0.03))
             groove.apply_translation([*c, top - depth + 0.02 * np.sqrt(2)])
             section = depth * depth
         else:
-            width = rng.uniform(0.006, 0.025)
-            c = hole + _unit(side) * (keep + width / 2 + rng.uniform(0.002, 0.03))
             groove = box_at([width, 1.0, 2 * depth], [*c, top], side)
             section = width * depth
         cut_mesh = _minus(mesh, [groove])

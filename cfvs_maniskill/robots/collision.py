@@ -100,6 +100,7 @@ class ArmCollision:
         hulls = [h for h in self.hulls if not h.name.endswith(skip)] if skip else self.hulls
         indices = [h.index for h in hulls]
         reach = np.array([h.radius + margin for h in hulls])
+        centre = np.array([h.centre for h in hulls])  # bounding-sphere centres, link frames
         for begin in range(0, len(qs), chunk):
             poses = np.array(
                 [self.kinematics.link_poses(q, indices) for q in qs[begin : begin + chunk]]
@@ -111,7 +112,7 @@ class ArmCollision:
                     low = (h.vertices @ R[:, k, 2].T).min(axis=0) + t[:, k, 2]
                     hit[:, k] = low < table_z + margin
             if tree is not None:
-                centres = np.einsum("nkij,kj->nki", R, np.array([h.centre for h in hulls])) + t
+                centres = np.einsum("nkij,kj->nki", R, centre) + t
                 near = tree.query_ball_point(centres, np.broadcast_to(reach, hit.shape))
                 for n, k in zip(*np.nonzero(~hit), strict=True):
                     if near[n, k]:

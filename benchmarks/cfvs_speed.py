@@ -19,7 +19,7 @@ from benchmarks.common import Figure, Timer
 class Args:
     """Time OAKN / OPN forward passes and full CFVS 6-DoF episodes."""
 
-    episodes: int = 10
+    episodes: int = 30
     """CFVS 6-DoF episodes to time."""
     repeats: int = 50
     """Forward passes per network (median reported)."""

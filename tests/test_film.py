@@ -10,7 +10,7 @@ from cfvs_maniskill.agents.registry import make_agent
 from cfvs_maniskill.control.executor import Executor, ExecutorConfig
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.rendering.film import CAPTION_PX, Film, project
-from cfvs_maniskill.rendering.views import CLOSEUP_PX
+from cfvs_maniskill.rendering.views import CLOSEUP_PX, look_at
 
 
 def _record(r) -> dict:
@@ -69,6 +69,18 @@ def test_projection_puts_a_point_on_the_optical_axis_at_the_principal_point():
     )
     assert np.allclose(uv[0], [64, 48]) and np.allclose(uv[1], [74, 48])
     assert np.isnan(uv[2]).all()  # behind the camera: not drawn
+
+
+def test_look_at_gives_maniskills_camera_pose():
+    from mani_skill.utils import sapien_utils
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        eye, target = rng.normal(size=3), rng.normal(size=3)
+        ours, theirs = look_at(eye, target), sapien_utils.look_at(eye=eye, target=target).sp
+        assert np.allclose(ours.p, theirs.p, atol=1e-6)
+        q, r = np.asarray(ours.q), np.asarray(theirs.q)
+        assert min(np.abs(q - r).max(), np.abs(q + r).max()) < 1e-6  # q and -q: one turn
 
 
 def test_an_env_without_the_render_cameras_gets_a_clear_error():

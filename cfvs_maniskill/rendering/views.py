@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import sapien
 from mani_skill.sensors.camera import CameraConfig
-from mani_skill.utils import sapien_utils
+
+from cfvs_maniskill import geometry as G
 
 CLOSEUP_CAMERA = "closeup"
 OVERVIEW_CAMERA = "overview"
@@ -63,4 +64,14 @@ def aim_at_hole(cameras: dict, H: np.ndarray) -> None:
     for name, (eye, target) in views.items():
         cam = cameras.get(name)
         if cam is not None:  # None: the user replaced the render cameras
-            cam.camera.set_local_pose(sapien_utils.look_at(eye=eye, target=target).sp)
+            cam.camera.set_local_pose(look_at(np.asarray(eye), np.asarray(target)))
+
+
+def look_at(eye: np.ndarray, target: np.ndarray) -> sapien.Pose:
+    """The pose of a SAPIEN camera (x forward, y left, z up) at `eye` looking at `target`,
+    up towards world z: ManiSkill's `look_at` on numpy floats, which costs 20x less than
+    its torch round trip (every reset aims two cameras)."""
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    left = np.cross([0.0, 0.0, 1.0], forward)
+    left /= np.linalg.norm(left)
+    return G.to_pose(G.make(np.column_stack([forward, left, np.cross(forward, left)]), eye))

@@ -351,3 +351,23 @@ def test_hand_eye_floor_is_the_mount_error_seen_at_the_hole():
     s = floor_samples(0.0015, 0.5, 500, seed=1)
     assert np.all(s[:, 0] <= 0.0015 + np.radians(0.5) * lever + 1e-9)
     assert np.all(s[:, 1] <= 0.5 + 1e-6) and s[:, 0].max() > 0.0015
+
+
+def test_a_remembered_table_fit_is_the_fit_of_that_cloud_and_threshold():
+    """fit_table remembers recent fits (the calibration and the planner fit the same raw
+    view): a cloud with 1000 table points is too few at min_points=2000 (the nominal
+    table) but a fit at 200, whichever is asked first; a changed cloud is fitted anew."""
+    from cfvs_maniskill.perception.clouds import NOMINAL_TABLE, _fit_table, fit_table
+
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(0.3, 0.7, size=(1000, 2))
+    cloud = np.column_stack([xy, 0.003 + rng.normal(0, 0.001, 1000)]).astype(np.float32)
+    for first, second in ((2000, 200), (200, 2000)):
+        for m in (first, second, first):
+            fit, fresh = fit_table(cloud, min_points=m), _fit_table(cloud, m)[0]
+            assert np.array_equal(fit.normal, fresh.normal)
+            assert (fit.offset, fit.sigma) == (fresh.offset, fresh.sigma)
+            assert (fit is NOMINAL_TABLE) == (m == 2000)
+        cloud = cloud.copy()
+    moved = cloud + np.float32([0, 0, 0.004])
+    assert fit_table(moved).offset == pytest.approx(fit_table(cloud).offset + 0.004, abs=2e-4)

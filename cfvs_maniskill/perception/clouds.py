@@ -66,16 +66,37 @@ NOMINAL_TABLE = TableFit(np.array([0.0, 0.0, 1.0]), 0.0, 0.001)
 """When too little of the table is in view to fit it: the nominal top, 1 mm of noise."""
 
 
+_RECENT_FITS: list[tuple[np.ndarray, int, tuple[int, ...], TableFit]] = []
+"""The last few fits with their clouds, `min_points` and the point counts it was checked
+against: the agent's table calibration and the planner both fit the raw coarse view, and
+an identical cloud taking the same branches gives the identical fit (one fit of ~2.8 ms
+fewer per episode; nothing else is shared)."""
+
+
 def fit_table(world: np.ndarray, min_points: int = 200) -> TableFit:
     """Fit the table's plane to the world points near its nominal top: least squares,
     then twice more on the points within 3 robust sigmas (objects standing on it, flying
     pixels and the hole's walls are outliers), the sigma from the median absolute residual."""
+    for cloud, used, counts, fit in _RECENT_FITS:
+        same_branches = all((c < used) == (c < min_points) for c in counts)
+        if same_branches and cloud.shape == world.shape and np.array_equal(cloud, world):
+            return fit
+    fit, counts = _fit_table(world, min_points)
+    _RECENT_FITS.insert(0, (world.copy(), min_points, counts, fit))
+    del _RECENT_FITS[3:]
+    return fit
+
+
+def _fit_table(world: np.ndarray, min_points: int) -> tuple[TableFit, tuple[int, ...]]:
+    """fit_table's fit, and the point counts it compared with `min_points`."""
     band = world[np.abs(world[:, 2]) < TABLE_BAND].astype(np.float64)
+    counts = [len(band)]
     if len(band) < min_points:
-        return NOMINAL_TABLE
+        return NOMINAL_TABLE, tuple(counts)
     keep = band
     normal, offset, sigma = NOMINAL_TABLE.normal, 0.0, NOMINAL_TABLE.sigma
     for _ in range(3):
+        counts.append(len(keep))
         if len(keep) < min_points:
             break
         # z = a x + b y + c, least squares
@@ -86,7 +107,8 @@ def fit_table(world: np.ndarray, min_points: int = 200) -> TableFit:
         r = band @ normal - offset
         sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-5)
         keep = band[np.abs(r) < 3 * sigma]
-    return TableFit(normal, float(offset), sigma)
+    normal.flags.writeable = False  # a remembered fit is handed out again
+    return TableFit(normal, float(offset), sigma), tuple(counts)
 
 
 def world_to_tool(points: np.ndarray, tcp: np.ndarray) -> np.ndarray:

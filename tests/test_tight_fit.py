@@ -30,7 +30,7 @@ from cfvs_maniskill.robots.ur5 import chamfered_peg_mesh
 TIGHT = "PegInsert6DoF-0.5mm-v1"
 
 
-def test_tight_task_files():
+def test_tight_task_files(tmp_path):
     for name, clearance in (("PegInsert6DoF-1mm", 0.001), ("PegInsert6DoF-0.5mm", 0.0005)):
         cfg = load_task(resources.bundled("tasks") / f"{name}.yaml")
         assert cfg.clearance == clearance and cfg.peg_chamfer == 0.0015 and cfg.dof == 6
@@ -38,6 +38,16 @@ def test_tight_task_files():
         assert cfg.contact_offset == 0.0002  # below the play per side (TaskConfig says why)
     paper = load_task(resources.bundled("tasks") / "PegInsert6DoF.yaml")
     assert paper.pcm is True and paper.contact_offset == 0.002  # the paper's tasks keep them
+    # A task file without a contact offset gets the largest of the two measured ones that
+    # is at most half its clearance.
+    offsets = {}
+    for clearance in (0.004, 0.002, 0.0005):
+        p = resources.bundled("tasks") / "PegInsert6DoF.yaml"
+        mine = p.read_text().replace("clearance: 0.004", f"clearance: {clearance}")
+        q = tmp_path / f"Mine{clearance}.yaml"
+        q.write_text(mine)
+        offsets[clearance] = load_task(q).contact_offset
+    assert offsets == {0.004: 0.002, 0.002: 0.0002, 0.0005: 0.0002}
     # The spiral's turns are never further apart than the band the peg can drop in from.
     assert spiral_pitch(0.0012, 0.0005, 0.0) == 0.00025
     assert spiral_pitch(0.0012, 0.004, 0.0) == 0.0012
@@ -55,7 +65,8 @@ def test_tight_task_files():
         ("contact_offset: 0", "contact_offset"),
         ("contact_offset: 0.05", "contact_offset"),
         ("contact_offset: 2mm", "expected a number"),
-        ("clearance: 0.0005", "expected contact_offset <= 0.00025 m"),  # the 2 mm default
+        ("clearance: 0.0003", "expected contact_offset <= 0.00015 m"),  # the 0.2 mm default
+        ("clearance: 0.002\ncontact_offset: 0.002", "expected contact_offset <= 0.001 m"),
     ],
 )
 def test_bad_tight_fields_name_the_field(tmp_path, line, words):

@@ -70,6 +70,21 @@ def test_run_takes_a_copied_edited_task_file(tmp_path):
     assert rec["provenance"]["task"]["file"] == path
 
 
+@pytest.mark.slow
+def test_a_task_file_with_its_own_clearance_runs_as_written(tmp_path):
+    """A copied 6-DoF task with a 2 mm fit and nothing else changed: it gets the contact
+    offset below its play (TaskConfig.contact_offset) and CFVS inserts."""
+    text = (resources.bundled("tasks") / "PegInsert6DoF.yaml").read_text()
+    path = tmp_path / "my_2mm.yaml"
+    path.write_text(text.replace("clearance: 0.004", "clearance: 0.002"))
+    out = tmp_path / "records.jsonl"
+    r = run_cli("cfvs_maniskill.run", "--task", str(path), "--episodes", "2", "--seed", "7",
+                "--out", str(out))  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    recs = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [(x["task"], x["success"]) for x in recs] == [("my_2mm", True)] * 2
+
+
 def test_a_task_file_named_like_a_bundled_one_must_be_that_task(tmp_path):
     same = tmp_path / "PegInsert3DoF.yaml"
     shutil.copy(resources.bundled("tasks") / "PegInsert3DoF.yaml", same)

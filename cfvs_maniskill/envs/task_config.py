@@ -28,6 +28,9 @@ class TaskConfigError(FileFieldError):
 Metres = Annotated[float, Field(ge=-1.0, le=1.0)]
 """A position on the table, world frame: within the UR5's reach (0.85 m) of its base."""
 Degrees = Annotated[float, Field(ge=-180.0, le=180.0)]
+LOOSE_CONTACT_OFFSET = 0.002
+TIGHT_CONTACT_OFFSET = 0.0002
+"""The two contact offsets a task without one gets (TaskConfig.contact_offset)."""
 
 
 @dataclass(frozen=True)
@@ -56,11 +59,12 @@ class TaskConfig:
     it off for exact per-step contacts: at 1 mm it kept stale contacts on both rim edges
     that held a peg with 0.4 mm of free play on each side (re-placed, the same pose had
     none), which was most of the 1 mm failures."""
-    contact_offset: Annotated[float, Field(gt=0.0, le=0.02)] = 0.002
+    contact_offset: Annotated[float, Field(gt=0.0, le=0.02)] | None = None
     """PhysX contact offset of every collision shape, metres: shape pairs closer than the sum
-    of their offsets get contacts. 2 mm catches the peg's fastest approach at 500 Hz. Tight
-    fits use 0.2 mm: with 2 mm or 0.5 mm, PhysX's convex-convex contacts held a peg centred
-    within 0.06 mm 1.7 mm into a 0.5 mm-clearance entry, on contacts reported touching
+    of their offsets get contacts. Unset: 2 mm where that is at most half the clearance (it
+    catches the peg's fastest approach at 500 Hz), else 0.2 mm. Tight fits need the small
+    one: with 2 mm or 0.5 mm, PhysX's convex-convex contacts held a peg centred within
+    0.06 mm 1.7 mm into a 0.5 mm-clearance entry, on contacts reported touching
     (separation 0, the peg chamfer's 45 deg normals) at the hole's corners while the walls
     were 0.25 mm away; the true pose then went in 73 of 80 times, with 0.2 mm 80 of 80."""
     hole_depth: Annotated[float, Field(gt=0.0, lt=PEG_LENGTH)] = DEFAULT_HOLE_DEPTH
@@ -102,6 +106,13 @@ class TaskConfig:
     max_episode_steps: Annotated[int, Field(ge=1, le=1_000_000)] = 1500
     """Control steps (20 Hz) before the episode is truncated."""
     source: str = ""
+
+    def __post_init__(self) -> None:
+        if self.contact_offset is None:
+            offset = LOOSE_CONTACT_OFFSET
+            if offset > self.clearance / 2:
+                offset = TIGHT_CONTACT_OFFSET
+            object.__setattr__(self, "contact_offset", offset)
 
     @property
     def env_id(self) -> str:

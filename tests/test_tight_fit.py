@@ -67,6 +67,8 @@ def test_tight_task_files(tmp_path):
         ("contact_offset: 2mm", "expected a number"),
         ("clearance: 0.0003", "expected contact_offset <= 0.00015 m"),  # the 0.2 mm default
         ("clearance: 0.002\ncontact_offset: 0.002", "expected contact_offset <= 0.001 m"),
+        ("dof: 4\ntilt_deg: [0, 30]", "expected [0, 0] for dof 4"),  # agents keep it vertical
+        ("dof: 3", "init_roll_deg (45) plus the largest |yaw_deg| (0) is 45: expected at most"),
     ],
 )
 def test_bad_tight_fields_name_the_field(tmp_path, line, words):

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Literal
 
+import numpy as np
+
 from pydantic import Field
 
 from cfvs_maniskill.constants import (
@@ -119,6 +121,13 @@ class TaskConfig:
         return f"{self.name}-v1"
 
 
+def square_yaw_play_deg(clearance: float) -> float:
+    """The largest turn about its axis at which the square peg's cross-section still fits
+    its hole's: h (cos a + sin a) <= h + clearance / 2, h the peg's half side."""
+    h = peg_half_extent("square")
+    return float(np.degrees(np.arcsin(min(1.0, (h + clearance / 2) / (h * np.sqrt(2))))) - 45.0)
+
+
 def _one_name_as_list(data: dict) -> dict:
     if isinstance(data.get("objects"), str):
         return {**data, "objects": [data["objects"]]}  # one name or split
@@ -138,6 +147,26 @@ def load_task(path: Path) -> TaskConfig:
         lo, hi = getattr(cfg, k)
         if lo > hi:
             raise TaskConfigError(path, k, f"expected [min, max] with min <= max, got {[lo, hi]}")
+    if cfg.dof != 6 and cfg.tilt_deg != (0.0, 0.0):
+        raise TaskConfigError(
+            path,
+            "tilt_deg",
+            f"expected [0, 0] for dof {cfg.dof} (3- and 4-DoF agents keep the peg vertical, "
+            f"as the paper's upright holes need), got {list(cfg.tilt_deg)}; or use dof: 6",
+        )
+    if cfg.dof == 3 and cfg.peg == "square":
+        # 3-DoF keeps the peg's yaw: its start roll and the hole's yaw must fit the play.
+        off = cfg.init_roll_deg + max(abs(y) for y in cfg.yaw_deg)
+        if off > (fits := square_yaw_play_deg(cfg.clearance)):
+            raise TaskConfigError(
+                path,
+                "init_roll_deg",
+                f"a square peg under dof 3 keeps its yaw, and enters a hole with "
+                f"{cfg.clearance * 1000:g} mm clearance only within {fits:.1f} deg of its "
+                f"yaw; init_roll_deg ({cfg.init_roll_deg:g}) plus the largest |yaw_deg| "
+                f"({off - cfg.init_roll_deg:g}) is {off:g}: expected at most {fits:.1f}, "
+                f"or dof: 4 (x y z and yaw), or peg: round",
+            )
     if cfg.contact_offset > cfg.clearance / 2:
         # Measured at 0.5 mm clearance: 0.5 mm and 2 mm offsets stalled centred pegs in the
         # entry, 0.2 mm did not (TaskConfig.contact_offset).

@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-
 from pydantic import Field
 
 from cfvs_maniskill.constants import (

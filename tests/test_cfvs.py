@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from cfvs_maniskill import resources
 from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, CFVSConfig, weights_for
 from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.control.executor import Executor
@@ -196,6 +197,43 @@ def test_agent_gives_up_with_a_reason_when_it_sees_nothing(make_env):
     agent.stage = "fine"
     a = agent.act(Observation(empty, env.unwrapped.tcp_matrix()))
     assert a.kind == "give_up" and "OPN" in a.reason
+
+
+def test_a_blind_fine_look_turns_the_wrist_to_each_other_yaw_then_gives_up(make_env):
+    """A fine look that sees nothing: the same pre-insertion pose at each other yaw of the
+    square (90 deg apart, the camera on another side), then a give-up; 3-DoF keeps its yaw
+    and the `no_turn` ablation gives up at once."""
+    from cfvs_maniskill.agents.base import Observation
+    from cfvs_maniskill.agents.cfvs import ablation_config
+    from cfvs_maniskill.agents.interface import insertion_pose
+    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+    from cfvs_maniskill.envs.task_config import load_task
+
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
+    env.reset(seed=3)
+    H = env.unwrapped.hole_pose
+    empty = {"pointcloud": {"xyzw": torch.zeros(1, 64, 4)}}
+
+    def blind_looks(spec, cfg=None):
+        agent = CFVSAgent(spec, cfg) if cfg else CFVSAgent(spec)
+        agent.reset(0)
+        agent.stage, agent.estimate = "fine", H
+        tcp = insertion_pose(spec.peg, H, -PRE_INSERT_HEIGHT, env.unwrapped.tcp_matrix())
+        poses = [tcp]
+        while (a := agent.act(Observation(empty, poses[-1]))).kind == "move":
+            poses.append(a.pose)
+        assert a.kind == "give_up" and "nothing seen" in a.reason
+        return poses
+
+    poses = blind_looks(TaskSpec.of(env.unwrapped.task))
+    assert len(poses) == 4  # the first yaw and three turns
+    for i, P in enumerate(poses):
+        assert np.allclose(P[:3, 3], poses[0][:3, 3]) and np.allclose(P[:3, 2], poses[0][:3, 2])
+        assert all(abs(P[:3, 0] @ Q[:3, 0]) < 1e-6 or P[:3, 0] @ Q[:3, 0] < -0.99
+                   for Q in poses[:i])  # fmt: skip
+    assert len(blind_looks(TaskSpec.of(env.unwrapped.task), ablation_config("no_turn"))) == 1
+    three = TaskSpec.of(load_task(resources.bundled("tasks") / "PegInsert3DoF.yaml"))
+    assert len(blind_looks(three)) == 1
 
 
 @pytest.mark.slow

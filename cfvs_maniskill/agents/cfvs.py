@@ -118,6 +118,12 @@ class CFVSConfig:
     nearest the tool's own whose camera has a clear line of sight to the opening from the
     pre-insertion pose (perception/view.py; the coarse cloud says what stands over the
     face). False: always the nearest."""
+    turn_when_blind: bool = True
+    """4- and 6-DoF: when a fine look sees nothing round the peg (a wall between the camera
+    and the opening, or a step nearer than the camera's minimum range fills its view),
+    move to the same pre-insertion pose turned about the hole's axis, which puts the
+    camera on another side of the opening, up to three turns. False: give up there. A 3-DoF
+    peg keeps its yaw, so it gives up either way."""
     table_calibration: bool = True
     """Correct the camera's depth scale and two of its mount angles once per episode, from
     the table plane in the coarse view, whose height the robot knows
@@ -142,9 +148,13 @@ class CFVSConfig:
         return cls(**{s: False for s in off}, **fields)
 
 
+MAX_TURNS = 3
+"""`turn_when_blind` tries each of the other three yaws of a square at most once."""
+
 REQUIRES = {
     "rim_plane": "coarse_to_fine",
     "final_correction": "coarse_to_fine",
+    "turn_when_blind": "coarse_to_fine",
     "opening_fit": "rim_plane",
     "face_height": "rim_plane",
     "face_guard": "face_height",
@@ -169,6 +179,7 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     "wide_ring": ("rim_narrow_ring", "the rim fit on the 20 mm ring always"),
     "round_ring": ("rim_square_ring", "a round rim ring beyond a square opening's corners"),
     "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
+    "no_turn": ("turn_when_blind", "give up when a fine look sees nothing round the peg"),
     "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
     "no_table_calibration": ("table_calibration", "the cloud as reported, not set by the table"),
 }
@@ -223,7 +234,7 @@ class CFVSAgent(Agent):
         files = weights_for(task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation)
         self.oakn, self.oakn_meta = load_weights(files["oakn"], "oakn", task.peg)
         self.opn, self.opn_meta = load_weights(files["opn"], ("opnv", "opn"), task.peg)
-        self.max_decisions = 2 + self.cfg.max_fine_iterations
+        self.max_decisions = 2 + self.cfg.max_fine_iterations + MAX_TURNS
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
@@ -234,6 +245,7 @@ class CFVSAgent(Agent):
         self.stage, self.fine_steps = "coarse", 0
         self.correction = IDENTITY  # the camera's errors change with the episode
         self.had_face = False  # whether any fine estimate had its face seen round it
+        self.blind_x: list[np.ndarray] = []  # tool x axes whose fine look saw nothing
         self.phase, self.estimate = "", None
         # Point subsets are random; seeded per episode, so the same episode repeats exactly.
         self.rng = np.random.default_rng(seed)
@@ -350,6 +362,19 @@ class CFVSAgent(Agent):
         i, _ = clear_view_yaw(world, poses, camera_in_tcp(), H)
         return poses[i]
 
+    def turn(self, tcp: np.ndarray) -> Action | None:
+        """`turn_when_blind`: the current estimate's pre-insertion pose at the least wrist
+        turn whose yaw is at least 45 deg from every yaw that saw nothing, or None."""
+        if not self.cfg.turn_when_blind or self.task.dof == 3 or self.estimate is None:
+            return None
+        self.blind_x.append(tcp[:3, 0].copy())
+        nearest = insertion_pose(self.peg, self.estimate, -PRE_INSERT_HEIGHT, tcp)
+        for pose in approach_yaws(nearest, tcp[:3, 0]):
+            if all(pose[:3, 0] @ x < np.cos(np.radians(45)) for x in self.blind_x):
+                self.phase = "fine: nothing seen round the peg, the wrist turned"
+                return Action.move(self.constrain(pose, tcp))
+        return None
+
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return constrain(self.task, T, ref)
 
@@ -381,7 +406,8 @@ class CFVSAgent(Agent):
             pts = object_points(xyzw, tcp, self.peg)  # tool frame
             a = self.predict_offset(fine_crop(pts))
             if a is None:
-                return Action.give_up("OPN: nothing seen around the peg")
+                turned = self.turn(tcp)
+                return turned or Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"
             if self.cfg.rim_plane:
                 a, source, face_seen = self.refine(a, pts, tcp)

@@ -108,15 +108,20 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
     """Held-out set C's wall bracket (an upright wall 10 cm tall, 2.5 cm from the hole),
     6-DoF: at the yaw nearest the tool's the camera ends up behind the wall (the fine stage
     sees nothing, or, with the retrained square net, steers the arm into the wall); turned
-    to a clear side the same scene inserts."""
+    to a clear side the same scene inserts, whether the coarse view chose that side or the
+    blind fine look turned the wrist there (`turn_when_blind`)."""
     outcome = held_out_outcomes(
         make_env,
         "PegInsert6DoF-v1",
         "heldout_c",
         "heldoutc_wall_bracket",
         191,
-        {"nearest": {"clear_view": False}, "clear": {}},
+        {
+            "nearest": {"clear_view": False, "turn_when_blind": False},
+            "turned": {"clear_view": False},
+            "clear": {},
+        },
     )
     reason = outcome["nearest"][1]
     assert not outcome["nearest"][0] and ("nothing seen" in reason or "blocked" in reason), outcome
-    assert outcome["clear"][0], outcome
+    assert outcome["turned"][0] and outcome["clear"][0], outcome

@@ -29,9 +29,9 @@ class TaskConfigError(FileFieldError):
 Metres = Annotated[float, Field(ge=-1.0, le=1.0)]
 """A position on the table, world frame: within the UR5's reach (0.85 m) of its base."""
 Degrees = Annotated[float, Field(ge=-180.0, le=180.0)]
+# The two measured contact offsets a task without one gets (TaskConfig.contact_offset).
 LOOSE_CONTACT_OFFSET = 0.002
 TIGHT_CONTACT_OFFSET = 0.0002
-"""The two contact offsets a task without one gets (TaskConfig.contact_offset)."""
 
 
 @dataclass(frozen=True)

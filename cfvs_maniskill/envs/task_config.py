@@ -14,6 +14,7 @@ from cfvs_maniskill.constants import (
     DEFAULT_CLEARANCE,
     DEFAULT_HOLE_DEPTH,
     PEG_LENGTH,
+    hole_half_extent,
     peg_half_extent,
 )
 from cfvs_maniskill.errors import FileFieldError
@@ -122,9 +123,9 @@ class TaskConfig:
 
 def square_yaw_play_deg(clearance: float) -> float:
     """The largest turn about its axis at which the square peg's cross-section still fits
-    its hole's: h (cos a + sin a) <= h + clearance / 2, h the peg's half side."""
-    h = peg_half_extent("square")
-    return float(np.degrees(np.arcsin(min(1.0, (h + clearance / 2) / (h * np.sqrt(2))))) - 45.0)
+    its hole's: h (cos a + sin a) <= the hole's half width, h the peg's half side."""
+    h, hole = peg_half_extent("square"), hole_half_extent("square", clearance)
+    return float(np.degrees(np.arcsin(min(1.0, hole / (h * np.sqrt(2))))) - 45.0)
 
 
 def _one_name_as_list(data: dict) -> dict:

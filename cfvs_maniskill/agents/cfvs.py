@@ -38,13 +38,14 @@ from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import (
     MIN_OBJECT_POINTS,
     fine_crop,
-    object_points,
     sample_fixed,
     tool_to_world,
+    valid_world_points,
+    world_object_points,
 )
 from cfvs_maniskill.perception.opening import MIN_LEVEL_POINTS, face_height, fit_opening
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
-from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_from_table
+from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_from_points
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
 
@@ -252,13 +253,9 @@ class CFVSAgent(Agent):
 
     # ------------------------------------------------------------------ perception
     @torch.no_grad()
-    def estimate_hole(
-        self, xyzw: np.ndarray, tcp: np.ndarray, pts: np.ndarray | None = None
-    ) -> np.ndarray | None:
-        """OAKN + Algorithm 1: the hole's world frame from one wrist cloud (or from its
-        tool-frame object points `pts`, if already taken), or None."""
-        if pts is None:
-            pts = object_points(xyzw, tcp, self.peg)
+    def estimate_hole(self, pts: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
+        """OAKN + Algorithm 1: the hole's world frame from one wrist view's tool-frame object
+        points `pts` (`object_points`), or None."""
         if len(pts) < MIN_OBJECT_POINTS:
             return None
         x = torch.from_numpy(sample_fixed(pts, int(self.oakn_meta["points"]), self.rng))[None]
@@ -378,24 +375,26 @@ class CFVSAgent(Agent):
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return constrain(self.task, T, ref)
 
-    def calibrated(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray:
-        """The cloud with the episode's table calibration applied (measured on the coarse
-        view, where most of the table is in sight)."""
+    def calibrated_points(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+        """The cloud's world points that saw something, with the episode's table
+        calibration applied (measured on the coarse view, where most of the table is in
+        sight)."""
+        world = valid_world_points(xyzw)
         if not self.cfg.table_calibration:
-            return xyzw
+            return world
         camera = tcp.copy()  # the tool's axes serve: the camera is fixed to the tool
         camera[:3, 3] = tcp[:3, :3] @ camera_in_tcp() + tcp[:3, 3]
         if self.stage == "coarse":
-            self.correction = correction_from_table(xyzw, camera) or IDENTITY
-        return self.correction.apply_xyzw(xyzw, camera)
+            self.correction = correction_from_points(world, camera) or IDENTITY
+        return self.correction.apply(world.astype(np.float64), camera)
 
     # ------------------------------------------------------------------ decisions
     def act(self, observation: Observation) -> Action:
         tcp = observation.tcp_pose
-        xyzw = self.calibrated(observation.obs["pointcloud"]["xyzw"][0].cpu().numpy(), tcp)
+        world = self.calibrated_points(observation.obs["pointcloud"]["xyzw"][0].cpu().numpy(), tcp)
         if self.stage == "coarse":
-            pts = object_points(xyzw, tcp, self.peg)
-            H = self.estimate_hole(xyzw, tcp, pts)
+            pts = world_object_points(world, tcp, self.peg)
+            H = self.estimate_hole(pts, tcp)
             if H is None or not np.all(np.isfinite(H)):
                 return Action.give_up("OAKN: the camera sees no hole object")
             self.phase, self.estimate = "coarse: OAKN keypoints -> hole frame", H
@@ -403,7 +402,7 @@ class CFVSAgent(Agent):
             pose = self.approach(H, tool_to_world(pts, tcp), tcp)
             return Action.move(self.constrain(pose, tcp))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
-            pts = object_points(xyzw, tcp, self.peg)  # tool frame
+            pts = world_object_points(world, tcp, self.peg)  # tool frame
             a = self.predict_offset(fine_crop(pts))
             if a is None:
                 turned = self.turn(tcp)

@@ -91,15 +91,16 @@ class ICPAgent(Agent):
         if self.oakn is not None:
             self.oakn.reset(seed)
 
-    def initial_object_pose(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
+    def initial_object_pose(self, pts: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
         """The model's starting pose in the world (upright at the workspace centre, or
-        placed so that its hole frame sits on OAKN's estimate)."""
+        placed so that its hole frame sits on OAKN's estimate from the view's tool-frame
+        object points `pts`)."""
         if self.oakn is None:
             task = self.task
             centre = [np.mean(task.workspace_x), np.mean(task.workspace_y)]
             z = -float(self.geom.visual_vertices[:, 2].min())
             return G.make(np.eye(3), np.array([*centre, z]))
-        H = self.oakn.estimate_hole(xyzw, tcp)
+        H = self.oakn.estimate_hole(pts, tcp)
         if H is None or not np.all(np.isfinite(H)):
             return None
         return H @ G.inv(self.model_hole)
@@ -126,7 +127,7 @@ class ICPAgent(Agent):
         pts = object_points(xyzw, tcp, self.task.peg)
         if len(pts) < MIN_OBJECT_POINTS:
             return Action.give_up(f"{self.name}: the camera sees no hole object")
-        T_init = self.initial_object_pose(xyzw, tcp)
+        T_init = self.initial_object_pose(pts, tcp)
         if T_init is None:
             return Action.give_up("OAKN: no initial pose for ICP")
         T_obj = self.register(tool_to_world(pts, tcp), T_init)

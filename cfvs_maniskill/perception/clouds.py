@@ -95,7 +95,7 @@ def _fit_table(world: np.ndarray, min_points: int) -> tuple[TableFit, tuple[int,
         return NOMINAL_TABLE, tuple(counts)
     keep = band
     normal, offset, sigma = NOMINAL_TABLE.normal, 0.0, NOMINAL_TABLE.sigma
-    for _ in range(3):
+    for i in range(3):
         counts.append(len(keep))
         if len(keep) < min_points:
             break
@@ -106,7 +106,8 @@ def _fit_table(world: np.ndarray, min_points: int) -> tuple[TableFit, tuple[int,
         normal, offset = np.array([-a, -b, 1.0]) / scale, c / scale
         r = band @ normal - offset
         sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-5)
-        keep = band[np.abs(r) < 3 * sigma]
+        if i < 2:  # the last pass's inliers would go unused
+            keep = band[np.abs(r) < 3 * sigma]
     normal.flags.writeable = False  # a remembered fit is handed out again
     return TableFit(normal, float(offset), sigma), tuple(counts)
 
@@ -128,7 +129,13 @@ def object_points(
 
     The table is the plane fitted to the cloud itself (`fit_table`), with a margin of its
     measured noise: the cloud may come from any sensor profile and calibration."""
-    world = valid_world_points(xyzw)
+    return world_object_points(valid_world_points(xyzw), tcp, peg, keep_table)
+
+
+def world_object_points(
+    world: np.ndarray, tcp: np.ndarray, peg: str, keep_table: bool = False
+) -> np.ndarray:
+    """`object_points` of a cloud's world points that saw something (valid_world_points)."""
     if not keep_table:
         table = fit_table(world)
         world = world[table.height(world) > table.margin]

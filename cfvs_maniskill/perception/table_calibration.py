@@ -46,14 +46,6 @@ class CameraCorrection:
         M = self.scale * R @ self.rotation @ R.T
         return ((world - c) @ M.T + c).astype(np.float32)
 
-    def apply_xyzw(self, xyzw: np.ndarray, camera: np.ndarray) -> np.ndarray:
-        """The same on an (..., 4) xyzw cloud; empty pixels (w = 0) stay as they are."""
-        out = np.array(xyzw, dtype=np.float32, copy=True)
-        flat = out.reshape(-1, 4)
-        seen = flat[:, 3] > 0
-        flat[seen, :3] = self.apply(flat[seen, :3].astype(np.float64), camera)
-        return out
-
     @property
     def tilt_deg(self) -> float:
         return float(np.degrees(Rotation.from_matrix(self.rotation).magnitude()))
@@ -68,7 +60,13 @@ def correction_from_table(
     """The correction that puts the table the cloud shows at its known height with its
     normal up, for a cloud from a camera believed at 4x4 `camera`; None when too little
     table is in view or the plane found is too far off to be the table's."""
-    world = valid_world_points(xyzw)
+    return correction_from_points(valid_world_points(xyzw), camera, table_height)
+
+
+def correction_from_points(
+    world: np.ndarray, camera: np.ndarray, table_height: float = 0.0
+) -> CameraCorrection | None:
+    """`correction_from_table` of a cloud's world points that saw something."""
     table = fit_table(world, min_points=MIN_TABLE_POINTS)
     if np.count_nonzero(np.abs(table.height(world)) < table.margin) < MIN_TABLE_POINTS:
         return None

@@ -356,3 +356,17 @@ def test_registry_lists_the_paper_agents_and_makes_every_ablation():
         agent = resolve_agent(name)(task)
         assert agent.name == name
         assert agent.cfg == ablation_config(name.removeprefix("cfvs_"))
+
+
+def test_pointnet_grouping_takes_each_clouds_own_points():
+    """gather (one index_select over the batch's rows) must pick point idx[b, ...] of cloud
+    b: an offset wrong by a cloud would mix the clouds of a training batch."""
+    from cfvs_maniskill.nets.pointnet2 import gather
+
+    torch.manual_seed(0)
+    x = torch.rand(3, 2, 50).transpose(1, 2)  # (B, N, C), not contiguous
+    idx = torch.randint(0, 50, (3, 7, 4))
+    out = gather(x, idx)
+    assert out.shape == (3, 7, 4, 2)
+    for b in range(3):
+        assert torch.equal(out[b], x[b][idx[b]])

@@ -35,8 +35,9 @@ def _reported(true: np.ndarray, camera: np.ndarray, scale: float, turn: np.ndarr
     return p + np.random.default_rng(1).normal(0, 0.0005, p.shape)
 
 
-def _xyzw(points: np.ndarray) -> np.ndarray:
-    return np.column_stack([points, np.ones(len(points))]).astype(np.float32)
+def _seen(points: np.ndarray) -> np.ndarray:
+    """The points as a cloud's valid world points (float32)."""
+    return points.astype(np.float32)
 
 
 def test_scale_and_tilt_of_the_camera_come_back_from_the_table():
@@ -44,7 +45,7 @@ def test_scale_and_tilt_of_the_camera_come_back_from_the_table():
     camera, true = _camera(), _scene(rng)
     turn = Rotation.from_rotvec(np.radians([0.4, -0.3, 0.0])).as_matrix()
     seen = _reported(true, camera, 1.02, turn)
-    corr = correction_from_table(_xyzw(seen), camera)
+    corr = correction_from_table(_seen(seen), camera)
     assert corr is not None
     assert abs(corr.scale * 1.02 - 1.0) < 5e-4
     fixed = corr.apply(seen, camera)
@@ -66,7 +67,7 @@ def test_the_correction_found_in_one_view_holds_at_another_pose():
         R = camera[:3, :3]
         return _reported(true, camera, 0.985, R @ mount @ R.T)
 
-    corr = correction_from_table(_xyzw(view(first)), first)
+    corr = correction_from_table(_seen(view(first)), first)
     assert corr is not None
     seen = view(later)
     err = np.linalg.norm(corr.apply(seen, later)[6000:] - true[6000:], axis=1).mean()
@@ -76,7 +77,7 @@ def test_the_correction_found_in_one_view_holds_at_another_pose():
 def test_a_calibrated_camera_is_left_as_it_is():
     rng = np.random.default_rng(3)
     camera, true = _camera(), _scene(rng)
-    corr = correction_from_table(_xyzw(_reported(true, camera, 1.0, np.eye(3))), camera)
+    corr = correction_from_table(_seen(_reported(true, camera, 1.0, np.eye(3))), camera)
     assert corr is not None and abs(corr.scale - 1) < 2e-4 and corr.tilt_deg < 0.02
 
 
@@ -84,10 +85,10 @@ def test_no_correction_without_enough_table_or_from_a_plane_that_is_not_the_tabl
     rng = np.random.default_rng(4)
     camera = _camera()
     only_block = _scene(rng)[6000:]
-    assert correction_from_table(_xyzw(only_block), camera) is None
+    assert correction_from_table(_seen(only_block), camera) is None
     # A plane 2 cm up (a large flat face near the table's height) is not the table.
     raised = _scene(rng)[:6000] + [0, 0, 0.015]
-    assert correction_from_table(_xyzw(raised), camera) is None
+    assert correction_from_table(_seen(raised), camera) is None
 
 
 def test_cfvs_finds_the_episodes_depth_scale_and_mount_tilt_from_its_first_view(make_env):

@@ -45,7 +45,7 @@ from cfvs_maniskill.perception.clouds import (
 )
 from cfvs_maniskill.perception.opening import MIN_LEVEL_POINTS, face_height, fit_opening
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
-from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_from_points
+from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_from_table
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
 
@@ -385,7 +385,7 @@ class CFVSAgent(Agent):
         camera = tcp.copy()  # the tool's axes serve: the camera is fixed to the tool
         camera[:3, 3] = tcp[:3, :3] @ camera_in_tcp() + tcp[:3, 3]
         if self.stage == "coarse":
-            self.correction = correction_from_points(world, camera) or IDENTITY
+            self.correction = correction_from_table(world, camera) or IDENTITY
         return self.correction.apply(world.astype(np.float64), camera)
 
     # ------------------------------------------------------------------ decisions

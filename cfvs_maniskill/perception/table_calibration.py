@@ -20,7 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.perception.clouds import fit_table, valid_world_points
+from cfvs_maniskill.perception.clouds import fit_table
 
 MIN_TABLE_POINTS = 2000
 """Fewer table points than this measure the plane too poorly to calibrate against."""
@@ -55,18 +55,12 @@ IDENTITY = CameraCorrection(np.eye(3), 1.0)
 
 
 def correction_from_table(
-    xyzw: np.ndarray, camera: np.ndarray, table_height: float = 0.0
-) -> CameraCorrection | None:
-    """The correction that puts the table the cloud shows at its known height with its
-    normal up, for a cloud from a camera believed at 4x4 `camera`; None when too little
-    table is in view or the plane found is too far off to be the table's."""
-    return correction_from_points(valid_world_points(xyzw), camera, table_height)
-
-
-def correction_from_points(
     world: np.ndarray, camera: np.ndarray, table_height: float = 0.0
 ) -> CameraCorrection | None:
-    """`correction_from_table` of a cloud's world points that saw something."""
+    """The correction that puts the table a cloud shows at its known height with its normal
+    up, from the cloud's world points that saw something (`valid_world_points`) taken by a
+    camera believed at 4x4 `camera`; None when too little table is in view or the plane
+    found is too far off to be the table's."""
     table = fit_table(world, min_points=MIN_TABLE_POINTS)
     if np.count_nonzero(np.abs(table.height(world)) < table.margin) < MIN_TABLE_POINTS:
         return None

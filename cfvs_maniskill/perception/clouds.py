@@ -95,7 +95,7 @@ def _fit_table(world: np.ndarray, min_points: int) -> tuple[TableFit, tuple[int,
     counts = [len(band)]
     if len(band) < min_points:
         return NOMINAL_TABLE, tuple(counts)
-    keep = band
+    keep, kept = band, None
     normal, offset, sigma = NOMINAL_TABLE.normal, 0.0, NOMINAL_TABLE.sigma
     for i in range(3):
         counts.append(len(keep))
@@ -108,8 +108,10 @@ def _fit_table(world: np.ndarray, min_points: int) -> tuple[TableFit, tuple[int,
         normal, offset = np.array([-a, -b, 1.0]) / scale, c / scale
         r = band @ normal - offset
         sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-5)
-        if i < 2:  # the last pass's inliers would go unused
-            keep = band[np.abs(r) < 3 * sigma]
+        inliers = np.abs(r) < 3 * sigma
+        if i == 2 or (kept is not None and np.array_equal(inliers, kept)):
+            break  # no next pass, or it would fit the same points to the same plane
+        keep, kept = band[inliers], inliers
     normal.flags.writeable = False  # a remembered fit is handed out again
     return TableFit(normal, float(offset), sigma), tuple(counts)
 

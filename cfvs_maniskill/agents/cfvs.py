@@ -391,9 +391,9 @@ class CFVSAgent(Agent):
     # ------------------------------------------------------------------ decisions
     def act(self, observation: Observation) -> Action:
         tcp = observation.tcp_pose
-        world = self.calibrated_points(observation.obs["pointcloud"]["xyzw"][0].cpu().numpy(), tcp)
+        xyzw = observation.obs["pointcloud"]["xyzw"][0].cpu().numpy()
         if self.stage == "coarse":
-            pts = world_object_points(world, tcp, self.peg)
+            pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
             H = self.estimate_hole(pts, tcp)
             if H is None or not np.all(np.isfinite(H)):
                 return Action.give_up("OAKN: the camera sees no hole object")
@@ -402,7 +402,7 @@ class CFVSAgent(Agent):
             pose = self.approach(H, tool_to_world(pts, tcp), tcp)
             return Action.move(self.constrain(pose, tcp))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
-            pts = world_object_points(world, tcp, self.peg)  # tool frame
+            pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
             a = self.predict_offset(fine_crop(pts))
             if a is None:
                 turned = self.turn(tcp)

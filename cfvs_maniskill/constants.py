@@ -35,11 +35,14 @@ position target reached in mid-air) ends it."""
 
 SUCCESS_TIP_TOLERANCE = 0.005
 """Success: the peg tip within 5 mm (along the hole axis) of the hole's bottom ..."""
-SUCCESS_LATERAL_MARGIN = 0.001
-"""... laterally inside the hole's cross-section, with this much slack for contact
-penetration of the simulated collision shapes ..."""
-SUCCESS_MAX_TILT_DEG = 10.0
-"""... and the peg axis within 10 degrees of the hole axis."""
+SUCCESS_WALL_PENETRATION = 0.00005
+"""... the peg's full section inside the hole's walls, with this much slack for the
+simulated contacts (a seated peg in a 4 mm fit ends within 0.003 mm of its wall; tight
+fits sometimes end 0.1-0.3 mm into it, which is not an insertion of that fit:
+benchmarks/penetration.py) ..."""
+SUCCESS_TILT_MARGIN_DEG = 0.5
+"""... and the peg's axis within the tilt the hole allows (its clearance across its
+depth: 5.1 deg at 4 mm, 0.64 deg at 0.5 mm) plus this margin."""
 
 MIN_WALL = 0.003
 """Thinnest wall left between the hole and the body's side."""

@@ -13,8 +13,15 @@ import numpy as np
 from cfvs_maniskill import provenance
 from cfvs_maniskill.agents.base import Agent, Observation
 from cfvs_maniskill.agents.interface import robot_view
-from cfvs_maniskill.constants import INSERT_OVERSHOOT, PRE_INSERT_HEIGHT, SUCCESS_TIP_TOLERANCE
+from cfvs_maniskill.constants import (
+    INSERT_OVERSHOOT,
+    PRE_INSERT_HEIGHT,
+    SUCCESS_TILT_MARGIN_DEG,
+    SUCCESS_TIP_TOLERANCE,
+    SUCCESS_WALL_PENETRATION,
+)
 from cfvs_maniskill.control.executor import Executor
+from cfvs_maniskill.envs.scene import max_tilt_deg
 
 if TYPE_CHECKING:
     from cfvs_maniskill.rendering.film import Film
@@ -32,6 +39,7 @@ class EpisodeResult:
     steps: int
     reason: str
     tilt_deg: float
+    """The hole's tilt from the vertical (the scene), deg."""
     tip_to_bottom_m: float
     lateral_offset_m: float
     wall_time_s: float
@@ -44,6 +52,11 @@ class EpisodeResult:
     [lateral mm, tilt deg] (measured by the runner from true poses; agents never see it)."""
     planned_moves: int = 0
     """Moves that followed a planned collision-free path instead of the straight line."""
+    peg_tilt_deg: float = float("nan")
+    """Where the peg ended: its axis from the hole's, deg ..."""
+    wall_penetration_m: float | None = None
+    """... and how far its section reached past the hole's wall (negative: play left; None:
+    no full section below the opening), the success test's inputs (scene.score)."""
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -59,11 +72,13 @@ def agent_seed(episode_seed: int) -> int:
     return int.from_bytes(digest.digest(), "little") & 0x7FFFFFFF
 
 
-def failure_reason(m: dict) -> str:
-    """Why a finished insertion is not a success, from the env's evaluate() metrics."""
-    if m["tilt_error_deg"] > 10:
+def failure_reason(m: dict, tilt_limit_deg: float) -> str:
+    """Why a finished insertion is not a success, from the env's evaluate() metrics and the
+    task's tilt limit (scene.max_tilt_deg plus its margin)."""
+    deep = m["tip_depth"] >= 0.005
+    if m["tilt_error_deg"] > (tilt_limit_deg if deep else max(tilt_limit_deg, 10.0)):
         return f"peg tilted {m['tilt_error_deg']:.1f} deg from the hole axis"
-    if m["tip_depth"] < 0.005:
+    if not deep:
         if m["tip_depth"] > 0.001 and m["lateral_offset"] < 0.003:
             # In the opening, not on the rim: the full section did not follow (tilt, yaw).
             return f"peg stuck {1000 * m['tip_depth']:.1f} mm into the hole's entry"
@@ -71,6 +86,9 @@ def failure_reason(m: dict) -> str:
             return f"peg stopped on the rim ({1000 * m['lateral_offset']:.1f} mm off the axis)"
         return f"peg missed the hole ({1000 * m['lateral_offset']:.0f} mm off the axis)"
     if m["tip_to_bottom"] <= SUCCESS_TIP_TOLERANCE:
+        if m["lateral_offset"] < 0.003 and m["wall_penetration"] > SUCCESS_WALL_PENETRATION:
+            # In the hole, but further off its axis than the walls allow: sunk into one.
+            return f"peg's section {1000 * m['wall_penetration']:.2f} mm into the hole's wall"
         # As deep as the hole's bottom or deeper, so the peg is not in it: it went down
         # beside the part (a hole near an edge), into another opening or through a gap.
         return f"peg went down beside the hole ({1000 * m['lateral_offset']:.1f} mm off the axis)"
@@ -152,7 +170,7 @@ def run_episode(
     m = {k: float(v[0]) for k, v in u.evaluate().items()}
     success = bool(m["success"]) and inserted
     if not success and not reason:
-        reason = failure_reason(m)
+        reason = failure_reason(m, max_tilt_deg(u.task) + SUCCESS_TILT_MARGIN_DEG)
     if film is not None:
         executor.on_step = None
         film.finish(executor.servo_time, "success" if success else f"failure: {reason}")
@@ -171,6 +189,10 @@ def run_episode(
         tilt_deg=round(u.episode_info["tilt_deg"], 2),
         tip_to_bottom_m=round(clean["tip_to_bottom"], 5),
         lateral_offset_m=round(clean["lateral_offset"], 5),
+        peg_tilt_deg=round(clean["tilt_error_deg"], 3),
+        wall_penetration_m=(
+            round(m["wall_penetration"], 6) if math.isfinite(m["wall_penetration"]) else None
+        ),
         wall_time_s=round(time.perf_counter() - t0, 3),
         sensor=u.sensor_profile.name,
         provenance=provenance.of_episode(env, getattr(agent, "weights", {})),

@@ -598,20 +598,32 @@ def test_compressed_records_are_read_and_a_resumed_run_appends_beside_them(tmp_p
     [
         # Recorded on a composite body: the peg went down 96 mm off the axis, 17 mm deeper
         # than the hole's bottom; it once read "stuck -17.0 mm above the hole's bottom".
-        (dict(tilt_error_deg=0.0, tip_depth=0.06, lateral_offset=0.0967, tip_to_bottom=-0.017),
+        (dict(tilt_error_deg=0.0, tip_depth=0.06, lateral_offset=0.0967, tip_to_bottom=-0.017,
+              wall_penetration=0.07),
          "peg went down beside the hole (96.7 mm off the axis)"),
-        (dict(tilt_error_deg=0.0, tip_depth=0.05, lateral_offset=0.001, tip_to_bottom=0.012),
+        (dict(tilt_error_deg=0.0, tip_depth=0.05, lateral_offset=0.001, tip_to_bottom=0.012,
+              wall_penetration=-0.0001),
          "peg stuck 12.0 mm above the hole's bottom"),
-        (dict(tilt_error_deg=0.0, tip_depth=0.0, lateral_offset=0.002, tip_to_bottom=0.06),
+        (dict(tilt_error_deg=0.0, tip_depth=0.0, lateral_offset=0.002, tip_to_bottom=0.06,
+              wall_penetration=float("-inf")),
          "peg stopped on the rim (2.0 mm off the axis)"),
-        (dict(tilt_error_deg=12.5, tip_depth=0.02, lateral_offset=0.001, tip_to_bottom=0.04),
+        (dict(tilt_error_deg=12.5, tip_depth=0.02, lateral_offset=0.001, tip_to_bottom=0.04,
+              wall_penetration=0.0),
          "peg tilted 12.5 deg from the hole axis"),
+        # At the bottom, in the hole's section but past its wall: sunk into the wall.
+        (dict(tilt_error_deg=0.1, tip_depth=0.045, lateral_offset=0.0005, tip_to_bottom=0.0,
+              wall_penetration=0.00027),
+         "peg's section 0.27 mm into the hole's wall"),
+        # Deep in a 0.5 mm hole and tilted more than its clearance allows (1.1 deg).
+        (dict(tilt_error_deg=2.0, tip_depth=0.045, lateral_offset=0.0002, tip_to_bottom=0.0,
+              wall_penetration=0.0),
+         "peg tilted 2.0 deg from the hole axis"),
     ],
 )  # fmt: skip
 def test_a_failed_insertion_is_named_by_where_the_peg_ended(metrics, expected):
     from cfvs_maniskill.episode import failure_reason
 
-    assert failure_reason(metrics) == expected
+    assert failure_reason(metrics, tilt_limit_deg=1.14) == expected
 
 
 def test_the_readme_gets_a_table_for_the_other_cameras_where_it_has_its_markers():

@@ -368,7 +368,13 @@ class PegInsertEnv(BaseEnv):
         r = score(self.task, G.inv(self.hole_pose) @ self.tcp_matrix())
         # One tensor per kind, split into views: ManiSkill calls this every control step.
         flags = torch.tensor([[r["success"]], [not r["finite"]]], device=self.device)
-        keys = ("tip_to_bottom", "lateral_offset", "tilt_error_deg", "tip_depth")
+        keys = (
+            "tip_to_bottom",
+            "lateral_offset",
+            "tilt_error_deg",
+            "tip_depth",
+            "wall_penetration",
+        )
         values = torch.tensor([[r[k]] for k in keys], dtype=torch.float32, device=self.device)
         return dict(success=flags[0], fail=flags[1], **{k: values[i] for i, k in enumerate(keys)})
 

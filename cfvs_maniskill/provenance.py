@@ -4,9 +4,11 @@ which files its numbers come from and a stale or mixed cell can be found (report
 
 from __future__ import annotations
 
+import ast
 import functools
 import hashlib
 import subprocess
+from collections.abc import Iterable
 from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
@@ -34,6 +36,45 @@ def code_version() -> str:
         return metadata.version("cfvs_maniskill")
     except metadata.PackageNotFoundError:
         return "unknown"
+
+
+NOT_EPISODE_CODE = (
+    *("report/", "data/", "train.py", "train_kovis.py", "diagnose_kovis.py"),
+    "bundled/",  # links to the user-file folders: hashed file by file in each record
+)
+"""Package paths that never run in an episode (tables, training, dataset collection: no
+episode-time module imports them), so their changes leave records current."""
+
+
+def fingerprint(sources: Iterable[tuple[str, bytes]]) -> str:
+    """A hash of the episode code among (path in the package, source) pairs: each module's
+    syntax tree without docstrings, so a comment, docstring or layout change keeps it and
+    any change to what runs moves it."""
+    h = hashlib.sha256()
+    for path, src in sorted(sources):
+        if not path.endswith(".py") or path.startswith(NOT_EPISODE_CODE):
+            continue
+        tree = ast.parse(src)
+        for node in ast.walk(tree):
+            body = getattr(node, "body", None)
+            if (
+                isinstance(body, list)
+                and body
+                and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)
+            ):
+                node.body = body[1:] or [ast.Pass()]
+        h.update(f"{path}\0{ast.dump(tree)}\0".encode())
+    return h.hexdigest()[:16]
+
+
+@functools.cache
+def code_fingerprint() -> str:
+    """The fingerprint of the episode code this process runs (`fingerprint`)."""
+    return fingerprint(
+        (f.relative_to(PACKAGE_DIR).as_posix(), f.read_bytes()) for f in PACKAGE_DIR.rglob("*.py")
+    )
 
 
 def _git(*args: str) -> str:
@@ -116,6 +157,7 @@ def of_episode(env, weights: dict[str, str]) -> dict:
     object_files = [spec.source, *([spec.mesh_file] if spec.mesh_file else [])]
     return {
         "code": code_version(),
+        "code_fingerprint": code_fingerprint(),
         "weights": dict(sorted(weights.items())),
         "sensor": {"name": u.sensor_profile.name, **_one(u.sensor_profile.source)},
         "task": {"name": u.task.name, **_one(u.task.source)},

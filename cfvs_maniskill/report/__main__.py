@@ -40,11 +40,24 @@ class ReportArgs:
 
 def check(records: list[dict], crashed: list[dict], readme: Path | None) -> int:
     """`--check`: every headline cell current and of one provenance, the README's table
-    what the records give. Prints each problem; 0 when there is none."""
+    what the records give. Prints a line per headline table naming the code that made it,
+    then each problem; 0 when there is none."""
+    from cfvs_maniskill.provenance import code_fingerprint
     from cfvs_maniskill.report import tables, trace
 
+    cells = tables.headline_cells(records + crashed)
+    today = code_fingerprint()
+    for table, sensors in tables.HEADLINES.items():
+        recs = [r for (_, _, sensor, _), rs in cells.items() if sensor in sensors for r in rs]
+        if recs:
+            prints = {trace.resolve(r).get("code_fingerprint") for r in recs}
+            state = "today's episode code" if prints == {today} else "NOT today's episode code"
+            print(
+                f"table {table} ({', '.join(sensors)}): {len(recs)} records, code "
+                f"{trace.code_versions(recs)}: {state} ({today})"
+            )
     problems = []
-    for (label, task, sensor, init), recs in tables.headline_cells(records + crashed).items():
+    for (label, task, sensor, init), recs in cells.items():
         status, reasons = trace.cell_status(recs)
         if status != "ok":
             problems.append(f"{label} {task} {sensor} {init}: {status}: {'; '.join(reasons)}")

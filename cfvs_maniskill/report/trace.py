@@ -1,7 +1,9 @@
 """Which code and files each table cell comes from, and whether it is still what today's
-code and files would give: a cell is *mixed* when its records differ in code version,
-weights, sensor profile or task file, and *stale* when they were made with weights, a
-sensor profile, a task or hole file that is not today's (or with no provenance at all).
+code and files would give: a cell is *mixed* when its records differ in code, weights,
+sensor profile or task file, and *stale* when they were made with episode code
+(provenance.code_fingerprint), weights, a sensor profile, a task or hole file that is not
+today's (or with no provenance at all). A record without a fingerprint has its commit's,
+computed from git.
 
 Records made before records carried provenance have a reconstructed one, `{"code":
 COMMIT, "reconstructed": "git"}`: COMMIT added the record to the repository (the code that
@@ -19,7 +21,7 @@ from pathlib import Path
 
 from cfvs_maniskill import resources
 from cfvs_maniskill.constants import PROJECT_ROOT
-from cfvs_maniskill.provenance import sha256
+from cfvs_maniskill.provenance import PACKAGE_DIR, code_fingerprint, fingerprint, sha256
 
 
 def _git(*args: str, text: bool = True):
@@ -37,7 +39,7 @@ def _tree(commit: str) -> dict[str, str]:
 
 @functools.cache
 def _blob_sha256(blob: str) -> str:
-    return hashlib.sha256(_git("cat-file", "blob", blob, text=False)).hexdigest()
+    return hashlib.sha256(_blob(blob)).hexdigest()
 
 
 def _at(commit: str, path: str) -> str:
@@ -59,9 +61,36 @@ def _hole_files() -> dict[str, tuple[str, ...]]:
     }
 
 
+@functools.cache
+def fingerprint_at(code: str) -> str | None:
+    """The episode code's fingerprint at commit `code` (a record's `code`: `git describe`
+    output or a hash), None where git cannot give it (not a commit here, or `+dirty`)."""
+    if "+" in code:
+        return None
+    commit = code.rsplit("-g", 1)[-1]  # `git describe`: TAG-N-gHASH
+    try:
+        listing = _git("ls-tree", "-r", commit, "--", PACKAGE_DIR.name)
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    blobs = {}
+    for ln in listing.splitlines():
+        meta, path = ln.split("\t", 1)
+        if meta.split()[1] == "blob" and path.endswith(".py"):
+            blobs[path.split("/", 1)[1]] = meta.split()[2]
+    return fingerprint((path, _blob(blob)) for path, blob in blobs.items())
+
+
+@functools.cache
+def _blob(blob: str) -> bytes:
+    return _git("cat-file", "blob", blob, text=False)
+
+
 def resolve(rec: dict) -> dict:
-    """The record's provenance, a reconstructed one filled in from git."""
+    """The record's provenance, a reconstructed one filled in from git, and the code's
+    fingerprint from its commit where the record has none."""
     p = rec.get("provenance") or {}
+    if p and "code_fingerprint" not in p:
+        p = {**p, "code_fingerprint": fingerprint_at(str(p.get("code")))}
     if p.get("reconstructed") != "git":
         return p
     commit = p["code"]
@@ -86,7 +115,7 @@ def signature(p: dict) -> tuple:
     """What must agree between the records of one cell, from a resolved provenance (the
     object's files may differ: a cell averages over objects)."""
     return (
-        p.get("code"),
+        p.get("code_fingerprint") or p.get("code"),
         json.dumps(p.get("weights"), sort_keys=True),
         (p.get("sensor") or {}).get("sha256"),
         (p.get("task") or {}).get("sha256"),
@@ -124,6 +153,10 @@ def stale_reasons(rec: dict, p: dict) -> list[str]:
     if not p:
         return ["no provenance"]
     out = []
+    if p.get("code_fingerprint") is None:
+        out.append(f"code {p.get('code')} unknown (not a commit of this checkout)")
+    elif p["code_fingerprint"] != code_fingerprint():
+        out.append(f"episode code changed since {p.get('code')}")
     for kind in ("sensor", "task"):
         entry = p.get(kind) or {}
         if entry.get("file") and _today(entry["file"]) != entry.get("sha256"):

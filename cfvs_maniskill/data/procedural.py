@@ -204,6 +204,7 @@ FAMILIES = {
     "narrow": "n",
     "composite": "c",
     "grooved": "g",
+    "plates": "l",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

@@ -10,7 +10,10 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   frozen generalisation set (`assets/generalisation/`) is made of it;
 - `grooved`: a box or disc with V-grooves and square slots cut across its face beside the
   opening, from edge to edge: long straight recessed edges, which no training family has.
-  Held out too: the successor frozen set (`assets/generalisation_grooved/`) is made of it.
+  Held out too: the successor frozen set (`assets/generalisation_grooved/`) is made of it;
+- `plates`: plates up to 30 cm wide, the opening far from their centre, with a wall or a
+  step 1-4 cm beside it, the opening on a small island, or decoy openings of other sizes.
+  Held out: the next release's frozen set (`assets/generalisation_plates/`) is made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -262,12 +265,83 @@ def grooved_body(rng, peg, clearance, folder: Path, name: str):
     return _write(mesh, hole, top, folder, name)
 
 
+def add_wall(rng, mesh, hole, top, keep):
+    """A wall or block standing on the face 1-4 cm from the opening's edge, 2-8 cm tall."""
+    side = rng.uniform(0, 2 * np.pi)
+    thick, length = rng.uniform(0.004, 0.03), rng.uniform(0.04, 0.2)
+    h = rng.uniform(0.02, 0.08)
+    c = hole + _unit(side) * (keep + rng.uniform(0.01, 0.04) + thick / 2)
+    wall = box_at([thick, length, h + 0.002], [*c, top + h / 2 - 0.001], side)
+    return _union([mesh, wall]), top
+
+
+def add_drop(rng, mesh, hole, top, keep):
+    """A step down, 1-4 cm from the opening's edge, to the table or part of the way."""
+    side = rng.uniform(0, 2 * np.pi)
+    size = 0.4
+    c = hole + _unit(side) * (keep + rng.uniform(0.01, 0.04) + size / 2)
+    floor = -0.01 if rng.random() < 0.4 else top * rng.uniform(0.3, 0.85)
+    notch = box_at([size, size, 1.0], [*c, floor + 0.5], side + rng.uniform(-0.5, 0.5))
+    return _minus(mesh, [notch]), top
+
+
+def add_island(rng, mesh, hole, top, keep):
+    """The opening on a small island: a round or square boss 1-5 mm wider than the
+    opening's wall, 5-25 mm above the face."""
+    h, r = rng.uniform(0.005, 0.025), keep + rng.uniform(0.001, 0.005)
+    if rng.random() < 0.5:
+        island = trimesh.creation.cylinder(r, h + 0.002, 64)
+        island.apply_translation([*hole, top + h / 2 - 0.001])
+    else:
+        island = box_at([2 * r, 2 * r, h + 0.002], [*hole, top + h / 2 - 0.001], rng.uniform(0, 1))
+    return _union([mesh, island]), top + h
+
+
+def add_decoys(rng, mesh, hole, top, keep):
+    """One or two blind openings of other sizes (0.6-1.5 times the opening's half width),
+    round or square, 1-3 cm deep, 1-6 cm from the opening's wall."""
+    cuts = []
+    half = keep - MIN_WALL
+    for _ in range(int(rng.integers(1, 3))):
+        r = half * rng.choice([rng.uniform(0.6, 0.85), rng.uniform(1.15, 1.5)])
+        c = hole + _unit(rng.uniform(0, 2 * np.pi)) * (
+            keep + r * np.sqrt(2) + rng.uniform(0.01, 0.06)
+        )
+        d = rng.uniform(0.01, 0.03)
+        if rng.random() < 0.5:
+            cut = trimesh.creation.cylinder(r, 2 * d, 64)
+            cut.apply_translation([*c, top])
+        else:
+            cut = box_at([2 * r, 2 * r, 2 * d], [*c, top], rng.uniform(0, np.pi / 2))
+        cuts.append(cut)
+    return _minus(mesh, cuts), top
+
+
+PLATE_FEATURES = (add_wall, add_drop, add_island, add_decoys)
+
+
+def plate_body(rng, peg, clearance, folder: Path, name: str):
+    """A plate 18-30 cm wide, 5-8 cm thick, the opening far from its centre (40-100% of
+    the way to the edge its wall allows), with one to three of: a wall or a step down 1-4
+    cm from the opening, the opening on a small island, decoy openings of other sizes."""
+    keep = keep_clear(peg, clearance)
+    top = rng.uniform(0.05, 0.08)
+    sx, sy = rng.uniform(0.18, 0.30), rng.uniform(0.12, 0.30)
+    room = np.array([sx, sy]) / 2 - keep
+    hole = room * rng.uniform(0.4, 1.0, size=2) * rng.choice([-1, 1], size=2)
+    mesh = box_at([sx, sy, top], [0, 0, top / 2])
+    for add in rng.choice(PLATE_FEATURES, size=int(rng.integers(1, 4)), replace=False):
+        mesh, top = add(rng, mesh, hole, top, keep)
+    return _write(mesh, hole, top, folder, name)
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
     "narrow": narrow_body,
     "composite": composite_body,
     "grooved": grooved_body,
+    "plates": plate_body,
 }
-HELD_OUT_FAMILIES = ("composite", "grooved")
+HELD_OUT_FAMILIES = ("composite", "grooved", "plates")
 """Never drawn for training: the frozen generalisation sets' families."""

@@ -1,0 +1,73 @@
+"""A frozen set's records are written once, by its release's run, and never re-run or
+replaced (docs/evaluation.md): every committed file under a frozen set's results folder is
+byte for byte what the commit that added it wrote."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+FROZEN_RESULTS = (
+    "results/final",
+    "results/generalisation",
+    "results/generalisation_grooved",
+    "results/generalisation_plates",
+)
+"""The results folders of the frozen sets (assets/final, assets/generalisation*)."""
+
+
+def git(*args: str, text: bool = True):
+    return subprocess.run(
+        ["git", "-C", str(ROOT), *args], capture_output=True, text=text, check=True
+    ).stdout
+
+
+def changed_since_added(path: str) -> str | None:
+    """None when the file is what the commit that added it wrote, else why not."""
+    added = git("log", "--diff-filter=A", "--format=%H", "--", path).split()
+    if not added:
+        return f"{path}: no commit adds it (git history missing?)"
+    first = added[-1]
+    if git("show", f"{first}:{path}", text=False) != (ROOT / path).read_bytes():
+        return f"{path}: differs from what {first[:12]} added"
+    return None
+
+
+def frozen_files() -> list[str]:
+    return git("ls-files", "--", *FROZEN_RESULTS).split()
+
+
+def test_every_frozen_sets_records_are_what_their_release_wrote():
+    files = frozen_files()
+    assert len(files) >= 8, files  # releases v1 and v2 of the final set, the generalisation runs
+    problems = [p for f in files if (p := changed_since_added(f))]
+    assert not problems, problems
+
+
+def test_the_check_catches_a_frozen_record_rewritten_after_its_release(tmp_path, monkeypatch):
+    """What the final set's v2 re-run did (its 0.5 mm D405 cell replaced after the release):
+    a frozen file rewritten in place is refused; restored, it passes again."""
+    path = next(f for f in frozen_files() if f.endswith(".jsonl.gz"))
+    original = (ROOT / path).read_bytes()
+    try:
+        (ROOT / path).write_bytes(original + b"\n")
+        assert changed_since_added(path) is not None
+    finally:
+        (ROOT / path).write_bytes(original)
+    assert changed_since_added(path) is None
+
+
+@pytest.mark.parametrize("release", ["v2", "v2-search0"])
+def test_the_final_sets_release_v2_is_its_own_run_and_the_rerun_is_labelled(release):
+    """The wrist-turn re-run of release v2's 0.5 mm D405 cell lives in a development folder
+    and names itself so; release v2's folder holds its one run (code 7e892fb)."""
+    import gzip
+    import json
+
+    recs = [json.loads(x) for x in gzip.open(ROOT / f"results/final/{release}/episodes.jsonl.gz")]
+    assert {r["provenance"]["code"][:7] for r in recs} == {"7e892fb"}
+    dev = ROOT / f"results/final_rerun_dev/{release}"
+    assert "development re-run, not the frozen release" in (dev / "summary.md").read_text()

@@ -48,9 +48,10 @@ def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
 def held_out_outcomes(
     make_env, env_id: str, folder: str, obj: str, seed: int, configs: dict, init_error=None
 ) -> dict:
-    """(success, reason) of one scene on held-out object `obj` (from `assets/<folder>`) for
-    each CFVS agent of `configs` (label -> CFVSConfig keyword arguments): a paired
-    comparison on the same env and seed."""
+    """(success, reason, lateral mm off the pre-insertion pose after the agent's last move)
+    of one scene on held-out object `obj` (from `assets/<folder>`) for each CFVS agent of
+    `configs` (label -> CFVSConfig keyword arguments): a paired comparison on the same env
+    and seed."""
     from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.control.executor import Executor
@@ -65,5 +66,6 @@ def held_out_outcomes(
     for label, kwargs in configs.items():
         agent = CFVSAgent(TaskSpec.of(env.unwrapped.task), CFVSConfig(**kwargs))
         r = run_episode(env, agent, ex, seed=seed)
-        out[label] = (r.success, r.reason)
+        last = r.move_residuals[-1][0] if r.move_residuals else float("inf")
+        out[label] = (r.success, r.reason, last)
     return out

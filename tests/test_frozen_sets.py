@@ -67,7 +67,8 @@ def test_the_final_sets_release_v2_is_its_own_run_and_the_rerun_is_labelled(rele
     import gzip
     import json
 
-    recs = [json.loads(x) for x in gzip.open(ROOT / f"results/final/{release}/episodes.jsonl.gz")]
+    with gzip.open(ROOT / f"results/final/{release}/episodes.jsonl.gz", "rt") as f:
+        recs = [json.loads(x) for x in f]
     assert {r["provenance"]["code"][:7] for r in recs} == {"7e892fb"}
     dev = ROOT / f"results/final_rerun_dev/{release}"
     assert "development re-run, not the frozen release" in (dev / "summary.md").read_text()

@@ -11,8 +11,6 @@ import pytest
 
 from cfvs_maniskill.perception.opening import face_height, face_level, fit_opening
 
-from .conftest import held_out_outcomes
-
 HALF = 0.02325  # the 0.5 mm task's square hole
 DATA = Path(__file__).parent / "data"
 
@@ -194,75 +192,6 @@ def test_recorded_round_wrist_views_end_nearer_the_opening_than_the_fine_network
     assert F is not None
     before, after = _errors(view["estimate"], H)[0], _errors(F, H)[0]
     assert before > 3.0 and after < 0.75, (before, after)
-
-
-@pytest.mark.slow
-def test_the_opening_fit_seats_a_tight_peg_beside_ribs_where_opn_alone_stops_on_the_rim(
-    make_env,
-):
-    """Development set B's ribbed disc at 0.5 mm (two ribs 1 cm from the hole): when traced,
-    OPN alone left the peg ~1 mm and ~2 deg (yaw) off and it stopped on the rim; with the
-    opening fit the same scene inserts (seed from the held-out tight-fit run,
-    docs/results.md). Only the agent's success is asserted: whether the ablation fails on
-    one scene depends on its point subsets and on PhysX's contact state from the episodes
-    before (each way seen), so one scene shows a failure mode, not a rate."""
-    outcome = held_out_outcomes(
-        make_env,
-        "PegInsert6DoF-0.5mm-v1",
-        "heldout_b",
-        "heldoutb_ribbed_disc",
-        1751262970,
-        {"opn": {"opening_fit": False}, "fit": {}},
-        init_error="small",
-    )
-    assert outcome["fit"][0], outcome
-
-
-@pytest.mark.slow
-def test_the_face_height_frees_tight_pegs_that_opns_height_left_on_the_rim_or_wedged(make_env):
-    """Held-out 0.5 mm scenes where OPN's height misleads the force-guided insertion, which
-    counts its phases from the expected entry: set D's flanged pipe (OPN put its opening
-    13-25 mm off in traces; the peg ends on the rim after the search) and set B's pocket
-    block (OPN 3-4 mm high; the peg stops wedged 1.7 mm into the entry, taken for one deep
-    in the hole). With the opening's height from the face both insert. (Set A's walled
-    plate no longer tells them apart: with the tight tasks' 0.2 mm contact offset OPN's
-    height inserts there too.) Seeds from results/heldout_tight. Only
-    the agent's success is asserted (as above: the ablation's outcome on one scene depends
-    on its point subsets and PhysX's contact history)."""
-    for folder, obj, seed, init_error, stop in (
-        ("heldout_d", "heldoutd_flange_pipe", 1129002821, "large", "on the rim"),
-        ("heldout_b", "heldoutb_pocket_block", 1603226148, "small", "into the hole's entry"),
-    ):
-        outcome = held_out_outcomes(
-            make_env,
-            "PegInsert6DoF-0.5mm-v1",
-            folder,
-            obj,
-            seed,
-            {"opn": {"face_height": False, "face_guard": False}, "face": {}},
-            init_error=init_error,
-        )
-        assert outcome["face"][0], (obj, stop, outcome)
-
-
-@pytest.mark.slow
-def test_the_fine_loop_stops_where_opns_new_estimate_has_no_face_round_it(make_env):
-    """Held-out set A's stepped block at 0.5 mm (a 4 cm step 2 cm from the hole): from the
-    pose the face supports OPN puts the hole on the step's top, 42 mm up and 6 mm aside,
-    where the cloud shows no face round the opening, and from there back: taking every
-    estimate the loop alternates to its limit and inserts 7 mm off; stopping at the first
-    estimate with no face, the same scene inserts. Only the agent's success is asserted
-    (as above)."""
-    outcome = held_out_outcomes(
-        make_env,
-        "PegInsert6DoF-0.5mm-v1",
-        "heldout",
-        "heldout_stepped_block",
-        395781089,
-        {"every": {"face_guard": False}, "guard": {}},
-        init_error="small",
-    )
-    assert outcome["guard"][0], outcome
 
 
 @pytest.mark.slow

@@ -74,7 +74,7 @@ def check(records: list[dict], crashed: list[dict], readme: Path | None) -> int:
 
 def main(args: ReportArgs) -> int:
     from cfvs_maniskill.report import plots, residuals, style, tables, videos
-    from cfvs_maniskill.report.load import load_records
+    from cfvs_maniskill.report.load import ReportError, load_records
 
     if not args.results.is_dir():
         print(f"error: {args.results}: not a folder of results", file=sys.stderr)
@@ -84,6 +84,9 @@ def main(args: ReportArgs) -> int:
         records = load_records(args.results, crashed, args.assets)
     except FileNotFoundError as e:  # an --assets folder that is not there
         print(f"error: --assets: {e}", file=sys.stderr)
+        return 2
+    except ReportError as e:  # before anything is written
+        print(f"error: {e}", file=sys.stderr)
         return 2
     if not records:
         print(
@@ -150,12 +153,15 @@ def main(args: ReportArgs) -> int:
             video_md,
         ]
     )
-    (args.out / "README.md").write_text(text + "\n")
-    (args.out / "summary.md").write_text(
+    summary = (
         f"# Success per agent, task and sensor profile ({len(records)} episodes)\n\n"
         + tables.table_compact(records)
         + "\n"
     )
+    for name, content in (("summary.md", summary), ("README.md", text + "\n")):
+        tmp = args.out / f".{name}.tmp"  # whole or not at all: a reader never sees half
+        tmp.write_text(content)
+        tmp.replace(args.out / name)
     if readme_text is not None:
         args.readme.write_text(readme_text)
         print(f"filled the headline tables into {args.readme}")

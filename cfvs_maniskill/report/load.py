@@ -12,6 +12,37 @@ from cfvs_maniskill.eval.results import read_text
 from cfvs_maniskill.objects.library import load_library
 
 
+class ReportError(ValueError):
+    """A result file the report cannot read: the message names the file, the line and what
+    was expected there."""
+
+
+def _parse(f: Path) -> list[tuple[int, dict]]:
+    """(line number, record) of a result file. A line that is not a record is an error
+    naming it, except the last line of a plain file an evaluation may still be writing
+    (torn mid-write), which is left out with a note."""
+    lines = read_text(f).splitlines()
+    out = []
+    for i, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+            if not isinstance(rec, dict):
+                raise ValueError("not a JSON object")
+        except ValueError as e:
+            if i == len(lines) and f.suffix == ".jsonl":
+                print(f"report: {f}:{i}: a torn last line left out (a running evaluation?)")
+                continue
+            raise ReportError(f"{f}:{i}: not a result record ({e}); fix or remove it") from None
+        if not rec.get("crashed") and not isinstance(rec.get("success"), bool):
+            raise ReportError(
+                f"{f}:{i}: field `success` is {rec.get('success')!r}: expected true or false"
+            )
+        out.append((i, rec))
+    return out
+
+
 def init_label(rec: dict) -> str:
     if "init_error" in rec:
         return rec["init_error"]
@@ -45,6 +76,8 @@ def load_records(
     Crashed jobs (no outcome) go to `crashed` instead. Records on objects outside the
     default library and `assets` (e.g. the CAD parts in results/cad_parts_v3 without
     `--assets assets/cad_parts`) are left out: a table averages over the objects it names.
+    A line that is not a record, or a record whose `success` is not true or false, raises
+    ReportError naming the file and line (a torn last line of a plain file is left out).
     """
     known = set(load_library(assets).specs)
     out, other = [], 0
@@ -54,13 +87,7 @@ def load_records(
             continue  # earlier measurements kept for the record (other code, settings)
         folder = f.parent.name if f.parent != root else None
         by_key: dict = {}  # an eval's job re-run (--retry-crashed) replaces its record
-        for i, line in enumerate(read_text(f).splitlines()):
-            if not line.strip():
-                continue
-            try:
-                rec = json.loads(line)
-            except ValueError:
-                continue  # a torn last line of a running evaluation
+        for i, rec in _parse(f):
             by_key[rec.get("key", i)] = rec
         for rec in by_key.values():
             if rec.get("object") not in known:

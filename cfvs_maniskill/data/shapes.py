@@ -114,14 +114,19 @@ def add_boss(rng, mesh, hole, top, keep):
     return _union([mesh, boss]), top + h
 
 
+def _step_down(rng, mesh, hole, top, keep, gap: tuple[float, float], size: float, turn: float):
+    """A `size`-wide notch, to the table or part of the way, `gap` (m) from the opening's
+    wall, turned up to `turn` (rad) off facing the hole."""
+    side = rng.uniform(0, 2 * np.pi)
+    c = hole + _unit(side) * (keep + rng.uniform(*gap) + size / 2)
+    floor = -0.01 if rng.random() < 0.4 else top * rng.uniform(0.3, 0.85)
+    notch = box_at([size, size, 1.0], [*c, floor + 0.5], side + rng.uniform(-turn, turn))
+    return _minus(mesh, [notch]), top
+
+
 def add_step(rng, mesh, hole, top, keep):
     """A step down (or to the table) next to the hole: an edge or an inner corner."""
-    side = rng.uniform(0, 2 * np.pi)
-    size = 0.3
-    c = hole + _unit(side) * (keep + rng.uniform(0.002, 0.03) + size / 2)
-    floor = -0.01 if rng.random() < 0.4 else top * rng.uniform(0.3, 0.85)
-    notch = box_at([size, size, 1.0], [*c, floor + 0.5], side + rng.uniform(-0.8, 0.8))
-    return _minus(mesh, [notch]), top
+    return _step_down(rng, mesh, hole, top, keep, (0.002, 0.03), 0.3, 0.8)
 
 
 def _slab(rng, keep: float, height: float) -> tuple[trimesh.Trimesh, np.ndarray]:
@@ -277,12 +282,7 @@ def add_wall(rng, mesh, hole, top, keep):
 
 def add_drop(rng, mesh, hole, top, keep):
     """A step down, 1-4 cm from the opening's edge, to the table or part of the way."""
-    side = rng.uniform(0, 2 * np.pi)
-    size = 0.4
-    c = hole + _unit(side) * (keep + rng.uniform(0.01, 0.04) + size / 2)
-    floor = -0.01 if rng.random() < 0.4 else top * rng.uniform(0.3, 0.85)
-    notch = box_at([size, size, 1.0], [*c, floor + 0.5], side + rng.uniform(-0.5, 0.5))
-    return _minus(mesh, [notch]), top
+    return _step_down(rng, mesh, hole, top, keep, (0.01, 0.04), 0.4, 0.5)
 
 
 def add_island(rng, mesh, hole, top, keep):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import open3d as o3d
@@ -20,6 +22,8 @@ from cfvs_maniskill.constants import hole_half_extent
 from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.envs.peg_insert import PARK
 from cfvs_maniskill.episode import run_episode
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def _episodes(make_env, agent_name: str, task: str, objects, seeds) -> list:
@@ -84,18 +88,39 @@ def test_open3d_is_the_cpu_build():
 
 
 # ---------------------------------------------------------------------------- episodes
-@pytest.mark.slow
-def test_icp_kpts_inserts_into_the_training_cuboid(make_env):
-    """The paper's setting where ICP w/ kpts works: 3-DoF, the model's own training cuboid."""
-    results = _episodes(make_env, "icp_kpts", "PegInsert3DoF", ["cuboid_train_a"], range(300, 306))
-    assert sum(r.success for r in results) >= 5, [r.reason for r in results]
+SCENES = range(300, 320)
+"""The baselines' episodes: 20 scenes of the test objects, 3-DoF, 15 cm, ideal sensor."""
+
+
+def readme_rate(agent: str, task: str = "PegInsert3DoF") -> float:
+    """The agent's success rate in the README's headline cell (15 cm, ideal sensor)."""
+    from cfvs_maniskill.report.load import load_records
+
+    recs = [
+        r
+        for r in load_records(ROOT / "results" / "headline")
+        if (r["label"], r["task"], r["init"], r["sensor"]) == (agent, task, "small", "ideal")
+    ]
+    assert len(recs) >= 100, (agent, task, len(recs))
+    return sum(r["success"] for r in recs) / len(recs)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("agent", ["icp", "3drhd"])
-def test_geometric_baselines_insert_in_3dof(make_env, agent):
-    results = _episodes(make_env, agent, "PegInsert3DoF", ["cuboid_train_a"], range(300, 306))
-    assert sum(r.success for r in results) >= 4, [r.reason for r in results]
+@pytest.mark.parametrize("agent", ["icp", "icp_kpts", "3drhd", "kovis"])
+def test_baselines_insert_on_the_test_objects_near_their_readme_rate(make_env, agent):
+    """Each baseline on 20 test-object scenes in 3-DoF succeeds at most 0.15 below its
+    README rate (the count's spread on 20 scenes is about 0.08): a drop of 0.2 puts the
+    expected count a whole episode under the bar. KOVIS
+    (stereo images, closed loop) also stays within 5 cm of the axis: untrained weights
+    wander off (9.5 cm in one try)."""
+    rate = readme_rate(agent)
+    results = _episodes(make_env, agent, "PegInsert3DoF", ["test"], SCENES)
+    k = sum(r.success for r in results)
+    assert k >= round((rate - 0.15) * len(SCENES)), (rate, k, [r.reason for r in results])
+    if agent == "kovis":
+        assert all(r.lateral_offset_m < 0.05 for r in results), [
+            r.lateral_offset_m for r in results
+        ]
 
 
 class _NothingInView(gym.Wrapper):
@@ -133,17 +158,6 @@ def test_give_up_on_an_empty_cloud(make_env):
         act = a.act(Observation(blank, env.unwrapped.tcp_matrix()))
         assert act.kind == "give_up" and act.reason, (name, act)
         assert isinstance(act, Action)
-
-
-@pytest.mark.slow
-def test_kovis_inserts_on_its_3dof_scenes(make_env):
-    """KOVIS (shipped round weights, stereo images), 3-DoF from 15 cm on a training cuboid,
-    closed loop from its images alone: it inserts (8 of 8 on seeds 300-307 measured; 0.91 /
-    0.94 on the test objects, README), every episode within 5 cm of the axis (untrained
-    weights wander off: 9.5 cm in one try)."""
-    results = _episodes(make_env, "kovis", "PegInsert3DoF", ["cuboid_train_a"], range(300, 306))
-    assert sum(r.success for r in results) >= 5, [r.reason for r in results]
-    assert all(r.lateral_offset_m < 0.05 for r in results), [r.lateral_offset_m for r in results]
 
 
 @pytest.mark.slow

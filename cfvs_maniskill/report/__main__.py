@@ -42,11 +42,10 @@ def check(records: list[dict], crashed: list[dict], readme: Path | None) -> int:
     """`--check`: every headline cell current and of one provenance, the README's table
     what the records give. Prints a line per headline table naming the code that made it,
     then each problem; 0 when there is none."""
-    from cfvs_maniskill.provenance import code_fingerprint
     from cfvs_maniskill.report import tables, trace
 
     cells = tables.headline_cells(records + crashed)
-    today = code_fingerprint()
+    today = trace.code_fingerprint()
     for table, sensors in tables.HEADLINES.items():
         recs = [r for (_, _, sensor, _), rs in cells.items() if sensor in sensors for r in rs]
         if recs:

@@ -48,8 +48,9 @@ episode-time module imports them), so their changes leave records current."""
 
 def fingerprint(sources: Iterable[tuple[str, bytes]]) -> str:
     """A hash of the episode code among (path in the package, source) pairs: each module's
-    syntax tree without docstrings, so a comment, docstring or layout change keeps it and
-    any change to what runs moves it."""
+    syntax tree without the docstrings of modules, classes and functions, so a comment,
+    one of those docstrings or a layout change keeps it and a change to what runs moves it
+    (a string standing after an assignment, an attribute's docstring, still counts)."""
     h = hashlib.sha256()
     for path, src in sorted(sources):
         if not path.endswith(".py") or path.startswith(NOT_EPISODE_CODE):

@@ -77,3 +77,16 @@ def test_a_peg_above_the_opening_has_no_section_in_the_hole():
     T[2, 3] = 0.01  # the tip 1 cm above the opening
     assert wall_penetration(TIGHT, T) == float("-inf")
     assert not score(TIGHT, T)["success"]
+
+
+@pytest.mark.slow
+def test_the_penetration_benchmark_measures_every_task_it_names():
+    """benchmarks/penetration.py on two episodes a task: a figure per task with a finite
+    p99, and a row per task in its table."""
+    from benchmarks.penetration import TASKS, Args, measure
+
+    figures, detail = measure(Args(episodes=2, compare_iterations=0))
+    assert len(figures) == len(TASKS)
+    for task, fig in zip(TASKS, figures, strict=True):
+        assert task in fig.name and fig.value.endswith(" mm") and "nan" not in fig.value
+        assert f"| {task} |" in detail

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cfvs_maniskill import provenance
-from cfvs_maniskill.agents.base import Agent, Observation
+from cfvs_maniskill.agents.base import Agent, AgentFailure, Observation, checked_action
 from cfvs_maniskill.agents.interface import robot_view
 from cfvs_maniskill.constants import (
     INSERT_OVERSHOOT,
@@ -57,6 +57,8 @@ class EpisodeResult:
     wall_penetration_m: float | None = None
     """... and how far its section reached past the hole's wall (negative: play left; None:
     no full section below the opening), the success test's inputs (scene.score)."""
+    agent_error: dict | None = None
+    """What the agent did wrong, when the episode ended on it (AgentFailure.to_json)."""
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -129,8 +131,15 @@ def run_episode(
     With `film`, the episode is filmed too (the caller writes the video)."""
     t0 = time.perf_counter()
     u = env.unwrapped
+    name = getattr(agent, "name", type(agent).__name__)
     obs, _ = env.reset(seed=seed, options=options or {})
-    agent.reset(agent_seed(seed))
+    failure = None
+    try:
+        agent.reset(agent_seed(seed))
+    except AgentFailure as e:  # one that could not be built (registry.UnbuiltAgent)
+        failure = e
+    except Exception as e:  # an agent's bug is its episode's failure, not the run's
+        failure = AgentFailure.of(name, 0, e)
     executor.reset(obs)
     if agent.privileged:  # the oracle's moves plan around the true object, not a view of it
         executor.know(u.object_surface())
@@ -141,8 +150,14 @@ def run_episode(
     inserted = False
     residuals: list[list[float]] = []
     try:
+        if failure is not None:
+            raise failure
         for k in range(agent.max_decisions):
-            action = agent.act(observe(env, obs))
+            try:
+                action = agent.act(observe(env, obs))
+            except Exception as e:
+                raise AgentFailure.of(name, k + 1, e) from e
+            action = checked_action(action, name, k + 1)
             if film is not None:
                 film.note(agent.phase or f"{action.kind} {k + 1}", agent.estimate)
             if action.kind == "give_up":
@@ -154,9 +169,6 @@ def run_episode(
                 inserted = res.ok
                 reason = res.reason
                 break
-            if action.pose is None or not np.all(np.isfinite(action.pose)):
-                reason = "agent returned a non-finite pose"
-                break
             res = executor.move_to(action.pose)
             residuals.append(pose_residual(u))
             if not res.ok:
@@ -165,6 +177,8 @@ def run_episode(
             obs = executor.last_obs
         else:
             reason = f"no insertion after {agent.max_decisions} decisions"
+    except AgentFailure as e:
+        failure, reason = e, str(e)
     except FloatingPointError as e:
         reason = f"simulation blew up: {e}"
     m = {k: float(v[0]) for k, v in u.evaluate().items()}
@@ -177,7 +191,7 @@ def run_episode(
     clean = {k: (v if math.isfinite(v) else float("nan")) for k, v in m.items()}
     return EpisodeResult(
         task=u.task.name,
-        agent=getattr(agent, "name", type(agent).__name__),
+        agent=name,
         object=u.episode_info["object"],
         seed=seed,
         init_error_m=round(u.episode_info["init_error_m"], 4),
@@ -197,4 +211,5 @@ def run_episode(
         sensor=u.sensor_profile.name,
         provenance=provenance.of_episode(env, getattr(agent, "weights", {})),
         move_residuals=residuals,
+        agent_error=None if failure is None else failure.to_json(),
     )

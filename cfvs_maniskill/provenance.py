@@ -41,31 +41,39 @@ def code_version() -> str:
 NOT_EPISODE_CODE = (
     *("report/", "data/", "train.py", "train_kovis.py", "diagnose_kovis.py"),
     "bundled/",  # links to the user-file folders: hashed file by file in each record
+    # Orchestration: which jobs run, where, and how their records are kept; an episode's
+    # outcome is decided by the worker, the session and what they call.
+    *("eval/__main__.py", "eval/local.py", "eval/ray_backend.py", "eval/crash.py"),
+    *("eval/results.py", "eval/settings.py", "eval/summary.py", "run.py", "cli.py"),
 )
-"""Package paths that never run in an episode (tables, training, dataset collection: no
-episode-time module imports them), so their changes leave records current."""
+"""Package paths that never decide an episode (tables, training, dataset collection, the
+evaluation's orchestration), so their changes leave records current."""
+
+
+def _is_text(stmt: ast.stmt) -> bool:
+    return (
+        isinstance(stmt, ast.Expr)
+        and isinstance(stmt.value, ast.Constant)
+        and isinstance(stmt.value.value, str)
+    )
 
 
 def fingerprint(sources: Iterable[tuple[str, bytes]]) -> str:
     """A hash of the episode code among (path in the package, source) pairs: each module's
-    syntax tree without the docstrings of modules, classes and functions, so a comment,
-    one of those docstrings or a layout change keeps it and a change to what runs moves it
-    (a string standing after an assignment, an attribute's docstring, still counts)."""
+    syntax tree without its string statements (docstrings of modules, classes, functions
+    and attributes), so a comment, a docstring or a layout change keeps it and a change to
+    what runs moves it."""
     h = hashlib.sha256()
     for path, src in sorted(sources):
         if not path.endswith(".py") or path.startswith(NOT_EPISODE_CODE):
             continue
         tree = ast.parse(src)
         for node in ast.walk(tree):
-            body = getattr(node, "body", None)
-            if (
-                isinstance(body, list)
-                and body
-                and isinstance(body[0], ast.Expr)
-                and isinstance(body[0].value, ast.Constant)
-                and isinstance(body[0].value.value, str)
-            ):
-                node.body = body[1:] or [ast.Pass()]
+            for name in ("body", "orelse", "finalbody"):
+                body = getattr(node, name, None)
+                if isinstance(body, list) and any(isinstance(b, ast.stmt) for b in body):
+                    kept = [b for b in body if not _is_text(b)]
+                    setattr(node, name, kept or ([ast.Pass()] if name == "body" else []))
         h.update(f"{path}\0{ast.dump(tree)}\0".encode())
     return h.hexdigest()[:16]
 

@@ -12,6 +12,7 @@ after the bundled files; a path on the command line works everywhere too.
 from __future__ import annotations
 
 import os
+import tempfile
 from importlib import resources
 from pathlib import Path
 from typing import Literal
@@ -20,6 +21,24 @@ Kind = Literal["tasks", "sensors", "assets", "agents"]
 KINDS: tuple[Kind, ...] = ("tasks", "sensors", "assets", "agents")
 HOME_ENV = "CFVS_HOME"
 """Environment variable naming the user folder (like ManiSkill's MS_ASSET_DIR)."""
+CACHE_ENV = "CFVS_CACHE"
+"""Environment variable naming the cache folder (derived URDFs, hole collision builds)."""
+
+
+def cache_root() -> Path:
+    """Where derived files go: `$CFVS_CACHE`, else `~/.cache/cfvs_maniskill` if it can be
+    written, else a folder of this user's in the temporary directory (a read-only HOME). Only
+    making an env writes there; importing the package writes nothing."""
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV])
+    home = Path.home() / ".cache" / "cfvs_maniskill"
+    try:
+        home.mkdir(parents=True, exist_ok=True)
+        if os.access(home, os.W_OK):
+            return home
+    except OSError:
+        pass
+    return Path(tempfile.gettempdir()) / f"cfvs_maniskill-{os.getuid()}"
 
 
 def bundled_root() -> Path:

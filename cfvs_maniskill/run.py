@@ -7,7 +7,9 @@ per episode, rendered off-screen (no display, no GPU needed).
 
 from __future__ import annotations
 
+import functools
 import sys
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -41,7 +43,9 @@ class RunArgs:
     init_error: Literal["small", "large"] = "small"
     """Initial peg-to-hole distance: small (15 cm) or large (30 cm)."""
     out: Path | None = None
-    """Append one JSON line per episode to this file."""
+    """Append one JSON line per episode to this file. Each record is keyed by (task, agent,
+    initial error, seed, sensor, search radius): run again, an episode already there is
+    skipped, so no report counts it twice; one run at a time per file (a lock)."""
     video: Path | None = None
     """Write one mp4 per episode into this directory: a lit close view of the hole, an
     overview and the wrist camera with the agent's estimated hole frame, captioned with the
@@ -68,13 +72,10 @@ def resolve_task(spec: str):
 
 
 def main(args: RunArgs) -> list:
-    from tqdm import tqdm
-
     from cfvs_maniskill.agents.registry import resolve_agent
-    from cfvs_maniskill.eval.results import ResultsError, append
+    from cfvs_maniskill.eval.results import ResultsError, exclusive, read_done
     from cfvs_maniskill.objects.library import SelectionError
     from cfvs_maniskill.session import make_env, open_session
-    from cfvs_maniskill.stats import wilson_interval
 
     task = resolve_task(args.task)
     try:
@@ -114,12 +115,42 @@ def main(args: RunArgs) -> list:
         session = open_session(env, args.agent, args.search_radius)
     except WeightsError as e:
         _fail(str(e))
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
+    seeds = [args.seed + i for i in range(args.episodes)]
+    done: dict = {}
+    with ExitStack() as held:
+        if args.out:
+            try:
+                args.out.parent.mkdir(parents=True, exist_ok=True)
+                held.enter_context(exclusive(args.out))
+                done = read_done(args.out)
+            except (OSError, ResultsError) as e:
+                _fail(f"--out {args.out}: {e}")
+        key = functools.partial(run_key, label, args)
+        if skipped := [s for s in seeds if key(s) in done]:
+            print(f"{len(skipped)} of the {len(seeds)} episodes are in {args.out} already: skipped")
+            seeds = [s for s in seeds if key(s) not in done]
+        results = _episodes(args, session, film, label, seeds, key)
+    env.close()
+    if not results:
+        return results
+    _print_summary(args, label, results)
+    return results
+
+
+def run_key(label: str, args: RunArgs, seed: int) -> str:
+    """A run record's key: everything that decides the episode besides the code and files."""
+    return f"run|{label}|{args.agent}|{args.init_error}|{seed}|{args.sensor}|{args.search_radius}"
+
+
+def _episodes(args: RunArgs, session, film, label: str, seeds: list[int], key) -> list:
+    from tqdm import tqdm
+
+    from cfvs_maniskill.eval.results import ResultsError, append
+
     results = []
-    bar = tqdm(range(args.episodes), desc=f"{args.agent} on {label}", unit="ep", file=sys.stderr)
-    for i in bar:
-        r = session.episode(args.seed + i, film=film)
+    bar = tqdm(seeds, desc=f"{args.agent} on {label}", unit="ep", file=sys.stderr)
+    for i, seed in enumerate(bar):
+        r = session.episode(seed, film=film)
         results.append(r)
         if film is not None:
             name = f"{label.removesuffix('-v1')}_{args.agent}_seed{r.seed}.mp4"
@@ -132,12 +163,17 @@ def main(args: RunArgs) -> list:
         )
         tqdm.write(line)
         if args.out:
-            try:
-                append(args.out, r.to_json())  # the eval runner's all-or-nothing append
+            try:  # the eval runner's all-or-nothing append
+                append(args.out, {**r.to_json(), "key": key(seed), "init_error": args.init_error})
             except ResultsError as e:
                 _fail(str(e))
         bar.set_postfix(success=f"{sum(x.success for x in results)}/{len(results)}")
-    env.close()
+    return results
+
+
+def _print_summary(args: RunArgs, label: str, results: list) -> None:
+    from cfvs_maniskill.stats import wilson_interval
+
     k, n = sum(r.success for r in results), len(results)
     lo, hi = wilson_interval(k, n)
     servo = sum(r.servo_time_s for r in results) / n
@@ -147,7 +183,6 @@ def main(args: RunArgs) -> list:
     )
     if args.video:
         print(f"videos in {args.video}")
-    return results
 
 
 if __name__ == "__main__":

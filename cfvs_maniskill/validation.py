@@ -24,6 +24,75 @@ from cfvs_maniskill.errors import FileFieldError
 
 T = TypeVar("T")
 
+MAX_FILE_BYTES = 1 << 20
+"""A user file larger than this (1 MiB) is refused before it is parsed: the largest real one
+(a hole file with a long description) is a few kB."""
+MAX_NODES = 10_000
+"""Values (mappings, lists, scalars) a file may hold; the largest real one holds about 100."""
+MAX_DEPTH = 16
+"""How deep mappings and lists may nest; real files nest 3 deep."""
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader that refuses what no user file needs and what makes a small file
+    expand without bound: anchors and aliases (an alias bomb of 10 lines is 9^9 values),
+    nesting past MAX_DEPTH (PyYAML recurses per level), more than MAX_NODES values."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self.depth = self.nodes = 0
+
+    def compose_node(self, parent, index):
+        mark = self.peek_event().start_mark
+        if self.check_event(yaml.AliasEvent) or getattr(self.peek_event(), "anchor", None):
+            raise _TooBig(
+                mark, "anchors and aliases (&name, *name) are not read: write the value out"
+            )
+        self.depth += 1
+        self.nodes += 1
+        if self.depth > MAX_DEPTH:
+            raise _TooBig(mark, f"nested more than {MAX_DEPTH} levels deep")
+        if self.nodes > MAX_NODES:
+            raise _TooBig(mark, f"more than {MAX_NODES} values")
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
+
+
+class _TooBig(yaml.YAMLError):
+    def __init__(self, mark, what: str):
+        super().__init__(f"{what} (line {mark.line + 1})")
+
+
+def read_yaml(path: Path | str, error: type[FileFieldError] = FileFieldError) -> Any:
+    """A user's YAML file, bounded before anything walks it (size, nesting, values, no
+    aliases); any problem is `error(file, "<file>" or "<top>", what is wrong)`."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise error(path, "<file>", f"{size} bytes; a file of at most {MAX_FILE_BYTES} bytes")
+        text = path.read_bytes().decode()
+    except OSError as e:
+        raise error(path, "<file>", f"cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise error(path, "<file>", f"not UTF-8 text: {e.reason} at byte {e.start}") from None
+    loader = _BoundedLoader(text)
+    try:
+        return loader.get_single_data()
+    except _TooBig as e:
+        raise error(path, "<top>", str(e)) from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise error(path, "<top>", f"not valid YAML{where}: {e}") from None
+    except (ValueError, RecursionError) as e:  # e.g. an integer of 10^5 digits
+        raise error(path, "<top>", f"not readable YAML: {type(e).__name__}: {e}") from None
+    finally:
+        loader.dispose()
+
+
 STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 """Every file schema's pydantic config (`__pydantic_config__` on its dataclasses)."""
 
@@ -193,12 +262,7 @@ def validate_file(
     (`name`, `source`) come from the file's name and place, never from its text; `prepare`
     turns the parsed mapping into the schema's shape (shorthands a file may use)."""
     path = Path(path)
-    try:
-        data: Any = yaml.safe_load(path.read_text())
-    except OSError as e:
-        raise error(path, "<file>", f"cannot read: {e.strerror}") from None
-    except yaml.YAMLError as e:
-        raise error(path, "<top>", f"not valid YAML: {e}") from None
+    data = read_yaml(path, error)
     if not isinstance(data, dict):
         raise error(path, "<top>", "expected a mapping of fields")
     for reserved in getattr(schema, "NOT_IN_FILE", ()):

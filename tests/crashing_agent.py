@@ -35,3 +35,39 @@ class StuckAgent(Agent):
     def act(self, observation: Observation) -> Action:
         time.sleep(600)
         return Action.give_up("woke up")
+
+
+class RaisingAgent(Agent):
+    """A user agent with a bug in its decision."""
+
+    obs_mode = "state"
+
+    def __init__(self, task):
+        self.task = task
+
+    def act(self, observation: Observation) -> Action:
+        return {}["no such key"]
+
+
+class BrokenInitAgent(Agent):
+    """A user agent whose constructor raises."""
+
+    obs_mode = "state"
+
+    def __init__(self, task):
+        raise RuntimeError("cannot open the calibration file")
+
+    def act(self, observation: Observation) -> Action:
+        return Action.insert()
+
+
+class NoneAgent(Agent):
+    """A user agent that forgets to return its action."""
+
+    obs_mode = "state"
+
+    def __init__(self, task):
+        self.task = task
+
+    def act(self, observation: Observation) -> Action:
+        return None

@@ -68,18 +68,40 @@ def _blow_up(env):
     return Action.move(env.unwrapped.tcp_matrix())
 
 
+def _raises(env):
+    return 1 / 0
+
+
+AGENT_FAULTS = {
+    _nan_pose: "non-finite pose",
+    _raises: "ZeroDivisionError: division by zero",
+    (lambda env: None): "returned None, not an Action",
+    (lambda env: "insert"): "returned 'insert', not an Action",
+    (lambda env: Action("jump")): "action kind 'jump'; expected one of move, insert, give_up",
+    (lambda env: Action("move", pose=np.eye(3))): "a pose of shape (3, 3)",
+    (lambda env: Action("move")): "move with no pose",
+}
+
+
 @pytest.mark.parametrize(
     "fault, words",
     [
-        (_nan_pose, "non-finite pose"),
+        *AGENT_FAULTS.items(),
         (_far_pose, "unreachable"),
         (_blow_up, "simulation blew up"),
     ],
 )
 def test_a_faulty_episode_fails_with_a_reason_and_the_next_one_runs(make_env, fault, words):
+    """An agent that raises or returns what is not an action fails its episode, the error
+    recorded (type, message, decision); so do moves the robot cannot make."""
     env = make_env(ENV, obs_mode="state")
     r = run_episode(env, _Scripted(env, fault), Executor(env), seed=10)
-    assert not r.success and words in r.reason
+    assert not r.success and words in r.reason, r.reason
+    if fault in AGENT_FAULTS:
+        assert r.agent_error["agent"] == "scripted" and r.agent_error["decision"] == 1
+        assert "agent scripted failed at decision 1" in r.reason
+    else:
+        assert r.agent_error is None
     # A whole record, as the run and eval commands write it.
     rec = json.loads(json.dumps(r.to_json()))
     assert rec["object"] == env.unwrapped.episode_info["object"] and rec["seed"] == 10

@@ -60,7 +60,7 @@ def _open_box_obj(path):
         ("body:\n  mesh: {file: nowhere.obj}\n", "body.mesh.file", "not found"),
         ("body:\n  mesh: {file: part.step}\n", "body.mesh.file", ".obj/.stl/.ply"),
         ("- just\n- a list\n", "<top>", "mapping"),
-        ("body: {box: {size: [0.1, 0.1\n", "<yaml>", "not valid YAML"),
+        ("body: {box: {size: [0.1, 0.1\n", "<top>", "not valid YAML"),
     ],
 )
 def test_spec_errors_name_file_and_field(tmp_path, text, field, words):

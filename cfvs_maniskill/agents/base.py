@@ -71,3 +71,55 @@ class Agent(abc.ABC):
 
     @abc.abstractmethod
     def act(self, observation: Observation) -> Action: ...
+
+
+ACTION_KINDS = ("move", "insert", "give_up")
+
+
+class AgentFailure(Exception):
+    """An agent that raised, or returned something that is not an action: its episode fails
+    with this as the reason and the evaluation goes on. `decision`: 0 when it was built or
+    reset, else which of its decisions (1-based)."""
+
+    def __init__(self, agent: str, decision: int, kind: str, message: str):
+        self.agent, self.decision, self.kind, self.message = agent, decision, kind, message
+        where = "before its first decision" if decision == 0 else f"at decision {decision}"
+        super().__init__(f"agent {agent} failed {where}: {kind}: {message}")
+
+    def __reduce__(self):  # crosses the pipe from an eval worker intact
+        return type(self), (self.agent, self.decision, self.kind, self.message)
+
+    def to_json(self) -> dict:
+        return {
+            "agent": self.agent,
+            "decision": self.decision,
+            "type": self.kind,
+            "message": self.message[:500],
+        }
+
+    @classmethod
+    def of(cls, agent: str, decision: int, e: BaseException) -> AgentFailure:
+        return cls(agent, decision, type(e).__name__, str(e))
+
+
+def checked_action(action, agent: str, decision: int):
+    """`action` if it is one the executor can carry out, else AgentFailure saying what it is."""
+    if not isinstance(action, Action):
+        raise AgentFailure(
+            agent, decision, "MalformedAction", f"returned {action!r:.80}, not an Action"
+        )
+    if action.kind not in ACTION_KINDS:
+        raise AgentFailure(
+            agent,
+            decision,
+            "MalformedAction",
+            f"action kind {action.kind!r}; expected one of {', '.join(ACTION_KINDS)}",
+        )
+    if action.kind == "move":
+        pose = None if action.pose is None else np.asarray(action.pose)
+        if pose is None or pose.shape != (4, 4) or not np.issubdtype(pose.dtype, np.number):
+            got = "no pose" if pose is None else f"a pose of shape {pose.shape} ({pose.dtype})"
+            raise AgentFailure(agent, decision, "MalformedAction", f"move with {got}, expected 4x4")
+        if not np.all(np.isfinite(pose)):
+            raise AgentFailure(agent, decision, "MalformedAction", "returned a non-finite pose")
+    return action

@@ -26,13 +26,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
 from cfvs_maniskill import resources
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec, camera_in_tcp, insertion_pose
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, hole_half_extent
-from cfvs_maniskill.nets.checkpoint import load_weights
+from cfvs_maniskill.nets.checkpoint import WeightsTableError, load_weights
 from cfvs_maniskill.nets.oakn import weighted_keypoints
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import (
@@ -48,6 +47,7 @@ from cfvs_maniskill.perception.rim import align_axis, rim_normal
 from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_from_table
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.task_dof import constrain
+from cfvs_maniskill.validation import read_yaml
 
 WEIGHTS_DIR = resources.bundled("agents") / "cfvs"
 
@@ -204,8 +204,15 @@ def weights_for(
     With `augmentation` set, the file trained that way: the shipped one if its .json says
     so, else its `_aug` / `_noaug` sibling."""
     table_file = weights_dir / "tasks.yaml"
-    table = yaml.safe_load(table_file.read_text()) if table_file.is_file() else {}
+    table = read_yaml(table_file, WeightsTableError) if table_file.is_file() else {}
+    if not isinstance(table, dict | None):
+        raise WeightsTableError(table_file, "<top>", "expected a mapping of task names")
     entry = (table or {}).get(task) or {"oakn": f"{peg}/oakn.pt", "opn": f"{peg}/opnv.pt"}
+    for net in ("oakn", "opn"):
+        if not isinstance(entry, dict) or not isinstance(entry.get(net), str):
+            raise WeightsTableError(
+                table_file, f"{task}.{net}", f"expected the path of a {net} file, got {entry!r}"
+            )
     out = {}
     for net in ("oakn", "opn"):
         p = weights_dir / entry[net]

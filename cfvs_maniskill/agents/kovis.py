@@ -25,7 +25,7 @@ import torch
 from cfvs_maniskill import resources
 from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.agents.interface import TaskSpec
-from cfvs_maniskill.nets.checkpoint import load_weights
+from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
 from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.images import normalise, stereo_images
@@ -63,7 +63,7 @@ class KOVISAgent(Agent):
         peg = task.peg
         self.net, self.meta = load_weights(self.cfg.weights_dir / f"{peg}.pt", "kovis", peg)
         if self.net.cfg.motion_dims < task.dof:
-            raise ValueError(
+            raise WeightsError(
                 f"{self.cfg.weights_dir / f'{peg}.pt'}: field 'config.motion_dims': the net "
                 f"drives {self.net.cfg.motion_dims} DoF, task {task.name} needs {task.dof}"
             )

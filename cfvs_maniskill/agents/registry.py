@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from cfvs_maniskill.agents.base import Agent
+from cfvs_maniskill.agents.base import Action, Agent, AgentFailure, Observation
 from cfvs_maniskill.agents.interface import TaskSpec
 
 
@@ -193,10 +193,30 @@ def agent_env_kwargs(name: str) -> dict:
 def make_agent(name: str, env) -> Agent:
     """The agent `name` for `env`'s task: built from the task's constants alone, except the
     privileged oracle; `agent.weights` says which weights files it loaded (provenance)."""
+    from cfvs_maniskill.nets.checkpoint import WeightsError
     from cfvs_maniskill.provenance import track_weights
 
     factory = resolve_agent(name)
     with track_weights() as loaded:
-        agent = factory(env) if name in PRIVILEGED else factory(TaskSpec.of(env.unwrapped.task))
+        try:
+            agent = factory(env) if name in PRIVILEGED else factory(TaskSpec.of(env.unwrapped.task))
+        except WeightsError:
+            raise  # a missing or wrong weights file: the caller names it and stops
+        except Exception as e:  # a bug in the agent's constructor fails its episodes
+            agent = UnbuiltAgent(AgentFailure.of(name, 0, e))
     agent.weights = loaded
     return agent
+
+
+class UnbuiltAgent(Agent):
+    """Stands in for an agent whose constructor raised: every episode fails with that error
+    (recorded, counted as a failure) and the evaluation goes on."""
+
+    def __init__(self, failure: AgentFailure):
+        self.name, self.failure = failure.agent, failure
+
+    def reset(self, seed: int) -> None:
+        raise self.failure
+
+    def act(self, observation: Observation) -> Action:
+        raise self.failure

@@ -119,13 +119,17 @@ def resolve(args: EvalArgs, tasks: dict | None = None) -> dict[str, list[str]]:
     return out
 
 
-def unbuildable(agents: list[str], tasks: dict) -> set[tuple[str, str]]:
+def unbuildable(
+    agents: list[str], tasks: dict, weights: dict[tuple[str, str], dict] | None = None
+) -> set[tuple[str, str]]:
     """(task, agent) pairs whose agent cannot be built for the task (e.g. no trained
     weights for its peg): each skipped with one line saying why; an agent that can run
-    none of the tasks -> exit 2. `tasks`: name -> TaskConfig."""
+    none of the tasks -> exit 2. `tasks`: name -> TaskConfig. `weights`, when given, gets
+    the weights files each (task, agent) loads (settings.Settings.weights)."""
     from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.agents.registry import PRIVILEGED, resolve_agent
     from cfvs_maniskill.nets.checkpoint import WeightsError
+    from cfvs_maniskill.provenance import track_weights
 
     skip: set[tuple[str, str]] = set()
     for a in agents:
@@ -134,44 +138,66 @@ def unbuildable(agents: list[str], tasks: dict) -> set[tuple[str, str]]:
         reasons = []
         for t, cfg in tasks.items():
             try:
-                resolve_agent(a)(TaskSpec.of(cfg))
-            except (WeightsError, ValueError) as e:
+                with track_weights() as loaded:
+                    resolve_agent(a)(TaskSpec.of(cfg))
+            except WeightsError as e:
                 print(f"skipping {t} x {a}: {e}")
                 skip.add((t, a))
                 reasons.append(str(e))
+                continue
+            except Exception:  # a bug in the agent: each of its episodes records it
+                continue
+            if weights is not None:
+                weights[(t, a)] = dict(sorted(loaded.items()))
         if tasks and len(reasons) == len(tasks):
             _fail(f"agent '{a}' can run none of the tasks {list(tasks)}: {reasons[0]}")
     return skip
 
 
-def sensor_files(sensors: tuple[str, ...]) -> dict[str, str]:
-    """Profile name -> name or file; an unknown profile or a bad file -> exit 2 naming it."""
+def sensor_files(sensors: tuple[str, ...]) -> dict[str, tuple[str, str]]:
+    """Profile name -> (name or file as given, the file it was read from); an unknown
+    profile or a bad file -> exit 2 naming it."""
     from cfvs_maniskill.sensing.profile import load_profile
 
     out = {}
     for s in sensors:
         try:
-            out[load_profile(s).name] = s
+            out[load_profile(s).name] = (s, str(load_profile(s).source))
         except ValueError as e:
             _fail(str(e))
     return out
 
 
-def main(args: EvalArgs) -> int:
-    from tqdm import tqdm
+MAX_JOBS = 100_000
+"""The largest grid one evaluation takes (at ~20 s an episode, 23 CPU-days): a larger one is
+a typo, refused before it is built."""
 
+
+def grid_size(args: EvalArgs, objects: dict[str, list[str]], sensors: int) -> int:
+    per_task = len(args.agents) * len(args.init_errors) * args.episodes_per_object * sensors
+    return sum(len(o) for o in objects.values()) * per_task
+
+
+def main(args: EvalArgs) -> int:
     from cfvs_maniskill.eval.jobs import make_jobs
-    from cfvs_maniskill.eval.local import BACKENDS
-    from cfvs_maniskill.eval.results import ResultsError, append, read_done
-    from cfvs_maniskill.eval.summary import write_summary
+    from cfvs_maniskill.eval.results import ResultsError, exclusive, read_done
+    from cfvs_maniskill.eval.settings import Settings, differences
     from cfvs_maniskill.eval.worker import WorkerConfig
-    from cfvs_maniskill.objects.spec import HoleSpecError
+    from cfvs_maniskill.provenance import sha256
 
     configs = find_tasks(args.tasks)
     objects = resolve(args, configs)
     files = sensor_files(args.sensors)
+    if (n := grid_size(args, objects, len(files))) > MAX_JOBS:
+        _fail(f"the grid holds {n} jobs; one evaluation takes at most {MAX_JOBS}: narrow it")
     tasks = {n: c for n, c in configs.items() if n in objects}
-    skip = unbuildable(list(args.agents), tasks)
+    now = Settings(
+        seed=args.seed,
+        search_radius=args.search_radius,
+        sensors={name: sha256(file) for name, (_, file) in files.items()},
+        tasks={name: sha256(c.source) for name, c in tasks.items()},
+    )
+    skip = unbuildable(list(args.agents), tasks, now.weights)
     jobs = make_jobs(
         objects,
         list(args.agents),
@@ -181,23 +207,45 @@ def main(args: EvalArgs) -> int:
         list(files),
     )
     jobs = [j for j in jobs if (j.task, j.agent) not in skip]
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / "episodes.jsonl"
     try:
-        done = read_done(path)
-    except ResultsError as e:
-        _fail(str(e))
-    if args.retry_crashed:
-        done = {k: r for k, r in done.items() if not r.get("crashed")}
-    todo = [j for j in jobs if j.key not in done]
-    print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already in {path}, {len(todo)} to run")
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        _fail(f"--out {args.out}: cannot be a results folder ({e.strerror or e})")
+    path = args.out / "episodes.jsonl"
     cfg = WorkerConfig(
         objects=objects,
         assets=[str(a) for a in args.assets],
         search_radius=args.search_radius,
-        sensor_files=files,
+        sensor_files={name: given for name, (given, _) in files.items()},
         task_files={n: c.source for n, c in tasks.items()},
     )
+    try:
+        with exclusive(path):
+            done = read_done(path)
+            if diff := differences(done, now):
+                _fail(
+                    f"{path} holds records made with other settings; resume with the settings "
+                    "that made them, or use another --out:\n  " + "\n  ".join(diff)
+                )
+            return _evaluate(args, jobs, path, done, cfg, now)
+    except ResultsError as e:
+        _fail(str(e))
+
+
+def _evaluate(args: EvalArgs, jobs, path: Path, done: dict, cfg, now) -> int:
+    """Run the jobs not in `done` (the caller holds the folder's lock), then summary.md."""
+    from tqdm import tqdm
+
+    from cfvs_maniskill.errors import FileFieldError
+    from cfvs_maniskill.eval.crash import JobError
+    from cfvs_maniskill.eval.local import BACKENDS
+    from cfvs_maniskill.eval.results import ResultsError, append
+    from cfvs_maniskill.eval.summary import write_summary
+
+    if args.retry_crashed:
+        done = {k: r for k, r in done.items() if not r.get("crashed")}
+    todo = [j for j in jobs if j.key not in done]
+    print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already in {path}, {len(todo)} to run")
     t0 = time.perf_counter()
     t_first = None
     started = max(1, min(args.workers, len(todo)))
@@ -216,7 +264,7 @@ def main(args: EvalArgs) -> int:
         bar.close()
         print(f"interrupted: {bar.n} episodes saved in {path}; run again to finish")
         return 130
-    except (ResultsError, HoleSpecError) as e:
+    except (ResultsError, FileFieldError, JobError) as e:
         # A hole object only a worker builds (its mesh) can turn out unusable mid-run:
         # name it; the episodes already appended stay, and a rerun resumes after them.
         bar.close()
@@ -232,7 +280,7 @@ def main(args: EvalArgs) -> int:
         steady = (len(todo) - started) / max(time.perf_counter() - t_first, 1e-9)
         line += f"; {steady:.2f} episodes/s once every worker had started"
     print(line + ")")
-    summary = write_summary(path, args.out / "summary.md", asdict(args))
+    summary = write_summary(path, args.out / "summary.md", asdict(args), now)
     print(summary)
     return 0
 

@@ -11,6 +11,19 @@ from dataclasses import dataclass, field
 from cfvs_maniskill.eval.jobs import Job
 
 
+class JobError(RuntimeError):
+    """An error raised while running a job that is not the agent's (those fail the episode):
+    names the job; the records already written stay and a rerun resumes after them."""
+
+    def __init__(self, job: Job, cause: BaseException):
+        self.job = job
+        text = str(cause).strip().splitlines()
+        super().__init__(
+            f"job {job.key} (seed {job.seed}) stopped the evaluation: "
+            f"{type(cause).__name__}: {text[-1] if text else ''}"
+        )
+
+
 def exit_reason(exitcode: int | None) -> str:
     """A dead process's exit code in words: killed by SIGKILL, exit code 1, ..."""
     if exitcode is None:

@@ -16,7 +16,8 @@ from collections.abc import Callable, Iterator
 from contextlib import suppress
 from multiprocessing import connection, get_context
 
-from cfvs_maniskill.eval.crash import CrashPolicy, exit_reason
+from cfvs_maniskill.errors import FileFieldError
+from cfvs_maniskill.eval.crash import CrashPolicy, JobError, exit_reason
 from cfvs_maniskill.eval.jobs import Job
 from cfvs_maniskill.eval.worker import Worker, WorkerConfig
 
@@ -48,7 +49,7 @@ def _serve(conn, cfg: WorkerConfig) -> None:
                 if failed is not None:
                     raise failed
                 conn.send(("ok", worker.run(job)))
-            except Exception as e:  # the parent re-raises it: same as an in-process run
+            except Exception as e:  # the parent raises it, naming the job
                 try:
                     conn.send(("error", e))
                 except Exception:  # the exception itself does not pickle
@@ -98,7 +99,13 @@ def run_local(
         w = Worker(cfg)
         try:
             for job in jobs:
-                yield w.run(job)
+                try:
+                    rec = w.run(job)
+                except FileFieldError:
+                    raise  # names its file already
+                except Exception as e:
+                    raise JobError(job, e) from e
+                yield rec
         finally:
             w.close()
         return
@@ -137,7 +144,9 @@ def run_local(
                 else:
                     kind, payload = message
                     if kind == "error":
-                        raise payload
+                        if isinstance(payload, FileFieldError):
+                            raise payload
+                        raise JobError(s.job, payload) from payload
                     s.job = None
                     yield payload
                 if queue:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-from cfvs_maniskill.eval.crash import CrashPolicy
+from cfvs_maniskill.eval.crash import CrashPolicy, JobError
 from cfvs_maniskill.eval.jobs import Job
 from cfvs_maniskill.eval.worker import Worker, WorkerConfig
 
@@ -81,6 +81,9 @@ def run_ray(
                 if record is not None:
                     yield record
                 continue
+            except ray.exceptions.RayTaskError as e:
+                cause = e.as_instanceof_cause() if hasattr(e, "as_instanceof_cause") else e
+                raise JobError(job, cause) from e
             yield rec
             submit(i)
     finally:

@@ -3,9 +3,13 @@ time, so any kill loses at most the episode that was running."""
 
 from __future__ import annotations
 
+import fcntl
 import gzip
 import json
 import os
+import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 
@@ -33,21 +37,44 @@ def read_done(path: Path) -> dict[str, dict]:
     error naming it."""
     done: dict[str, dict] = {}
     if compressed(path).exists():
-        done = {r["key"]: r for r in map(json.loads, read_text(compressed(path)).splitlines())}
+        try:
+            done = {r["key"]: r for r in map(json.loads, read_text(compressed(path)).splitlines())}
+        except (
+            OSError,
+            EOFError,
+            zlib.error,
+            ValueError,
+            KeyError,
+            TypeError,
+            RecursionError,
+        ) as e:
+            raise ResultsError(
+                f"{compressed(path)}: not a compressed results file ({type(e).__name__}: {e}); "
+                "restore it or move it away to resume"
+            ) from e
     if not path.exists():
         return done
-    raw = path.read_bytes()
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise ResultsError(f"{path}: cannot read the results ({e.strerror or e})") from e
     end = raw.rfind(b"\n") + 1  # everything after the last newline is torn
     if end < len(raw):
-        with open(path, "r+b") as f:
-            f.truncate(end)
+        try:
+            with open(path, "r+b") as f:
+                f.truncate(end)
+        except OSError as e:
+            raise ResultsError(
+                f"{path}: its torn last line cannot be cut off ({e.strerror or e}); "
+                "make the file writable to resume"
+            ) from e
     for i, line in enumerate(raw[:end].split(b"\n")):
         if not line.strip():
             continue
         try:
             rec = json.loads(line)
             done[rec["key"]] = rec
-        except (ValueError, KeyError, TypeError) as e:
+        except (ValueError, KeyError, TypeError, RecursionError) as e:
             raise ResultsError(
                 f"{path}: line {i + 1} is not a result record ({type(e).__name__}: {e}); "
                 "fix or remove that line to resume"
@@ -59,7 +86,10 @@ def append(path: Path, record: dict) -> None:
     """Append one record, or leave the file exactly as it was: a failed write (disk full,
     file-size limit) is cut back off, so the file never holds half a line."""
     data = (json.dumps(record) + "\n").encode()
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    except OSError as e:
+        raise ResultsError(f"{path}: cannot write results ({e.strerror or e})") from e
     try:
         size = os.fstat(fd).st_size
         try:
@@ -73,5 +103,31 @@ def append(path: Path, record: dict) -> None:
                 f"{path}: cannot append a result ({e.strerror or e}); the results already "
                 "there are intact: free some space and run the same command again to resume"
             ) from e
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def exclusive(path: Path) -> Iterator[None]:
+    """One writer at a time for a results file: a lock on `<file>.lock` beside it, which the
+    kernel drops when its process ends, however it ends (a kill leaves nothing behind). A
+    second writer gets a ResultsError naming the process that holds it."""
+    lock = path.with_name(path.name + ".lock")
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as e:
+        raise ResultsError(f"{lock}: cannot create the lock ({e.strerror or e})") from e
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "another process"
+            raise ResultsError(
+                f"{path}: {holder} is writing these results; wait for it to end, or use "
+                "another --out"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"process {os.getpid()}".encode(), 0)
+        yield
     finally:
         os.close(fd)

@@ -18,6 +18,7 @@ from typing import Any
 
 import torch
 
+from cfvs_maniskill.errors import FileFieldError
 from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig
 from cfvs_maniskill.nets.oakn import OAKN, OAKNConfig
 from cfvs_maniskill.nets.opn import OPN, OPNConfig
@@ -39,6 +40,10 @@ WEIGHTS_FORMAT = "cfvs_maniskill.weights/1"
 
 class WeightsError(ValueError):
     """A weights file that cannot be used; the message names the file and what it holds."""
+
+
+class WeightsTableError(FileFieldError, WeightsError):
+    """A weights folder's `tasks.yaml` that cannot be used: file, field, what was expected."""
 
 
 def safe_load(path: Path, error: type[Exception]) -> Any:
@@ -111,6 +116,15 @@ def load_weights(path: Path | str, net: str | tuple[str, ...], peg: str | None =
         raise WeightsError(
             f"{path}: trained for a {blob.get('peg')} peg (task {blob.get('task')}), "
             f"this task uses a {peg} peg"
+        )
+    state = blob.get("state_dict")
+    if not isinstance(state, dict):
+        raise WeightsError(f"{path}: holds no state_dict (expected a trained {net} file)")
+    broken = [k for k, v in state.items() if torch.is_tensor(v) and not torch.isfinite(v).all()]
+    if broken:  # a diverged training run saves these, and they load without a word
+        raise WeightsError(
+            f"{path}: parameter '{broken[0]}' holds NaN or infinity ({len(broken)} tensors): "
+            "the training that wrote it diverged; retrain or restore the file"
         )
     model = build(blob["net"], blob["config"])
     try:

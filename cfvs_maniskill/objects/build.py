@@ -30,6 +30,7 @@ import manifold3d as mf
 import numpy as np
 import trimesh
 
+from cfvs_maniskill import resources
 from cfvs_maniskill.constants import (
     DEFAULT_CLEARANCE,
     DEFAULT_HOLE_DEPTH,
@@ -62,7 +63,7 @@ rounded by hand); the opening is put on the face itself."""
 
 
 def cache_dir() -> Path:
-    return Path(os.environ.get("CFVS_CACHE", Path.home() / ".cache" / "cfvs_maniskill")) / "holes"
+    return resources.cache_root() / "holes"
 
 
 @dataclass

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -84,9 +85,10 @@ def load_library(extra_dirs: Iterable[Path | str] = (), include_default: bool = 
             continue
         if spec.name in lib.specs:
             first = lib.specs[spec.name].source
-            lib.errors.append(
-                HoleSpecError(f, "name", f"'{spec.name}' is already defined by {first}")
-            )
+            error = HoleSpecError(f, "name", f"'{spec.name}' is already defined by {first}")
+            lib.errors.append(error)
+            # Said at once: asked for by name, the first file's object is the one used.
+            warnings.warn(f"{error}; this file is not used: rename it", stacklevel=2)
             continue
         lib.specs[spec.name] = spec
     return lib

@@ -36,13 +36,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import yaml
 from pydantic import Field
 
 from cfvs_maniskill.constants import PEG_PROFILES
 from cfvs_maniskill.errors import FileFieldError
 from cfvs_maniskill.sensing.surfaces import DEFAULT_PART_MATERIAL, MATERIALS, contrast_of
-from cfvs_maniskill.validation import STRICT, validate
+from cfvs_maniskill.validation import STRICT, read_yaml, validate
 
 SPLITS = ("train", "test")
 BODY_KINDS = ("box", "cylinder", "prism", "mesh")
@@ -247,15 +246,10 @@ def parse_spec(data: Any, file: Path, raw_text: str = "") -> HoleSpec:
 
 def load_spec(path: Path | str) -> HoleSpec:
     """Read one YAML hole-object file. Raises HoleSpecError naming the file and field."""
-    path = Path(path).resolve()
     try:
-        text = path.read_text()
-    except OSError as e:
-        raise HoleSpecError(path, "<file>", f"cannot read: {e.strerror}") from e
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise HoleSpecError(path, "<yaml>", f"not valid YAML{where}: {e}") from e
+        path = Path(path).resolve()
+    except (OSError, RuntimeError) as e:  # a symlink loop: RuntimeError before Python 3.13
+        raise HoleSpecError(path, "<file>", f"cannot resolve the path: {e}") from None
+    data = read_yaml(path, HoleSpecError)  # bounded: size, nesting, no aliases
+    text = path.read_text()
     return parse_spec(data, path, text)

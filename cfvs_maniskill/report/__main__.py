@@ -142,6 +142,8 @@ def main(args: ReportArgs) -> int:
             tables.table_iv(ideal),
             "## Closed-loop residual: true error from the pre-insertion pose after each move",
             residuals.table(records),
+            "## Episodes ended by an agent's own error",
+            tables.table_agent_errors(records),
             "## Provenance: which code and files each agent's records come from",
             tables.table_provenance(records, crashed),
             "## Plots: the agents (CFVS, the paper's baselines, the oracle)",

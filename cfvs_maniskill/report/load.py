@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 import json
 import sys
+import zlib
 from pathlib import Path
 
 from cfvs_maniskill.eval.results import read_text
@@ -21,7 +22,10 @@ def _parse(f: Path) -> list[tuple[int, dict]]:
     """(line number, record) of a result file. A line that is not a record is an error
     naming it, except the last line of a plain file an evaluation may still be writing
     (torn mid-write), which is left out with a note."""
-    lines = read_text(f).splitlines()
+    try:
+        lines = read_text(f).splitlines()
+    except (OSError, EOFError, zlib.error, UnicodeDecodeError) as e:
+        raise ReportError(f"{f}: cannot be read as results ({type(e).__name__}: {e})") from None
     out = []
     for i, line in enumerate(lines, start=1):
         if not line.strip():
@@ -30,7 +34,7 @@ def _parse(f: Path) -> list[tuple[int, dict]]:
             rec = json.loads(line)
             if not isinstance(rec, dict):
                 raise ValueError("not a JSON object")
-        except ValueError as e:
+        except (ValueError, RecursionError) as e:  # RecursionError: nested past JSON's limit
             if i == len(lines) and f.suffix == ".jsonl":
                 print(f"report: {f}:{i}: a torn last line left out (a running evaluation?)")
                 continue

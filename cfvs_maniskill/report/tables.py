@@ -209,6 +209,29 @@ def table_provenance(records: list[dict], crashed: list[dict]) -> str:
     return "\n".join(out)
 
 
+def table_agent_errors(records: list[dict], limit: int = 50) -> str:
+    """The episodes that ended on an agent's own error (it raised, or returned something
+    that is not an action): failures in every table above, listed here so none hides."""
+    failed = [r for r in records if r.get("agent_error")]
+    if not failed:
+        return "None: no agent raised or returned a malformed action."
+    out = [
+        f"{len(failed)} episodes, counted as failures"
+        + (f"; the first {limit}:" if len(failed) > limit else ":"),
+        "",
+        "| agent | task | sensor | object | seed | decision | error |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in failed[:limit]:
+        e = r["agent_error"]
+        text = f"{e.get('type')}: {e.get('message', '')}".replace("|", "/").replace("\n", " ")[:160]
+        out.append(
+            f"| {r['label']} | {r['task']} | {r['sensor']} | {r.get('object')} | {r.get('seed')} "
+            f"| {e.get('decision')} | {text} |"
+        )
+    return "\n".join(out)
+
+
 def table_headline(records: list[dict], sensors: tuple[str, ...] = HEADLINES["headline"]) -> str:
     """Success at 15 / 30 cm per agent, task and sensor profile, the main agents only (the
     README's tables; everything else is in the report)."""

@@ -1,7 +1,7 @@
 """UR5 with a peg rigidly on its flange (no gripper) and an eye-in-hand RGB-D camera.
 
-The arm comes from the PyPI package `example-robot-data` (BSD); nothing is downloaded. At
-import we write a derived URDF into the cache folder:
+The arm comes from the PyPI package `example-robot-data` (BSD); nothing is downloaded. When
+an env is first made (never at import) we write a derived URDF into the cache folder:
   * mesh paths made absolute; the low-poly collision STLs also serve as visual meshes,
     because rendering cost is set by the triangles in view (the .dae visuals are ~50x more);
   * the stock 1 cm `ee_link` collision box removed (it would touch the peg);
@@ -42,6 +42,7 @@ from mani_skill.agents.registration import REGISTERED_AGENTS, register_agent
 from mani_skill.sensors.camera import CameraConfig
 from scipy.spatial.transform import Rotation
 
+from cfvs_maniskill import resources
 from cfvs_maniskill.constants import PEG_LENGTH, ROUND_PEG_RADIUS, SQUARE_PEG_SIDE
 
 ARM_JOINTS = (
@@ -205,7 +206,7 @@ def _write_once(path: Path, data: bytes) -> None:
 
 def urdf_path(profile: str, chamfer: float = 0.0) -> str:
     """Write (once) and return the derived URDF for `profile` in the cache folder."""
-    root = Path(os.environ.get("CFVS_CACHE", Path.home() / ".cache" / "cfvs_maniskill"))
+    root = resources.cache_root()
     mesh_file = ""
     if chamfer > 0:
         data = chamfered_peg_mesh(profile, chamfer).export(file_type="stl")
@@ -269,6 +270,10 @@ class _UR5Peg(BaseAgent):
             )
         )
 
+    @property
+    def urdf_path(self) -> str:  # written when the robot is loaded, not at import
+        return urdf_path(self.peg_profile, self.peg_chamfer)
+
     def _after_init(self):
         self.tcp = self.robot.links_map[TCP_LINK]
 
@@ -279,7 +284,6 @@ class UR5SquarePeg(_UR5Peg):
 
     uid = "ur5_peg_square"
     peg_profile = "square"
-    urdf_path = urdf_path("square")
 
 
 @register_agent()
@@ -288,7 +292,6 @@ class UR5RoundPeg(_UR5Peg):
 
     uid = "ur5_peg_round"
     peg_profile = "round"
-    urdf_path = urdf_path("round")
 
 
 def robot_uid_for(profile: str, chamfer: float = 0.0) -> str:
@@ -302,7 +305,7 @@ def robot_uid_for(profile: str, chamfer: float = 0.0) -> str:
         cls = type(
             f"{base.__name__}Chamfer{round(chamfer * 1e6)}um",
             (base,),
-            {"uid": uid, "urdf_path": urdf_path(profile, chamfer), "peg_chamfer": chamfer},
+            {"uid": uid, "peg_chamfer": chamfer},
         )
         register_agent()(cls)
     return uid

@@ -74,14 +74,6 @@ def main(args: BenchArgs) -> int:
         text += ["", f"## {title}", "", detail]
     RESULTS.write_text("\n".join(text) + "\n")
     print(f"wrote {RESULTS}")
-    # The README quotes the figure table: refreshed here, never pasted by hand.
-    from cfvs_maniskill.constants import PROJECT_ROOT
-    from cfvs_maniskill.report.tables import replace_marked
-
-    readme = PROJECT_ROOT / "README.md"
-    block = "\n".join(table)
-    readme.write_text(replace_marked(readme.read_text(), "bench", block, str(readme)))
-    print(f"filled the figure table into {readme}")
     return 0
 
 

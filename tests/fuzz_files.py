@@ -2,7 +2,7 @@
 hole object) set to a wrong type, NaN, a negative number, a huge number, or left out.
 Each case must give a named error (the file and that field) or, where the value is one
 the field allows (a negative workspace y, a left-out optional key), load; none may raise
-anything else. `python -m tests.fuzz_files` rewrites the table in docs/reliability.md.
+anything else. `python -m tests.fuzz_files` rewrites the table in tests/FUZZ.md.
 """
 
 from __future__ import annotations
@@ -189,7 +189,7 @@ def table() -> str:
 def main() -> int:
     from cfvs_maniskill.report.tables import replace_marked
 
-    doc = Path(__file__).resolve().parent.parent / "docs" / "reliability.md"
+    doc = Path(__file__).resolve().parent / "FUZZ.md"
     doc.write_text(replace_marked(doc.read_text(), "fuzz", table(), str(doc)))
     print(f"wrote the fuzz table into {doc}")
     return 0

@@ -153,6 +153,22 @@ EVAL = [
 ]  # fmt: skip
 
 
+def _cli(module: str, *args: str, capsys) -> tuple[int, str, str]:
+    """(exit code, stdout, stderr) of a command run in this process: the refusals below
+    end before any worker or env starts, so a fresh interpreter would only add its import."""
+    import tyro
+
+    mod = __import__(f"cfvs_maniskill.{module}", fromlist=["main"])
+    spec = mod.EvalArgs if module == "eval.__main__" else mod.RunArgs
+    try:
+        code = mod.main(tyro.cli(spec, args=list(args)))
+        code = code if isinstance(code, int) else 0
+    except SystemExit as e:
+        code = e.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
 def _lines(path: Path) -> list[dict]:
     return [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
 
@@ -208,7 +224,9 @@ def test_the_report_counts_and_lists_agent_errors(faulty_eval, tmp_path):
         (["--sensors", "SENSOR_FILE"], "sensor 'ideal': its file"),
     ],
 )
-def test_resuming_with_other_settings_is_refused_naming_them(faulty_eval, tmp_path, change, words):
+def test_resuming_with_other_settings_is_refused_naming_them(
+    faulty_eval, tmp_path, change, words, capsys
+):
     """A finished folder asked again with another base seed, search radius or sensor file of
     the same name: exit 2 naming the difference; nothing appended."""
     out = tmp_path / "out"
@@ -218,13 +236,15 @@ def test_resuming_with_other_settings_is_refused_naming_them(faulty_eval, tmp_pa
     sensor.write_text(text + "\n# another calibration\n")
     change = [str(sensor) if c == "SENSOR_FILE" else c for c in change]
     before = (out / "episodes.jsonl").read_bytes()
-    r = run_cli("cfvs_maniskill.eval", *EVAL, "--agents", "oracle", "--out", str(out), *change)
-    assert r.returncode == 2, r.stdout[-1000:] + r.stderr[-2000:]
-    assert "holds records made with other settings" in r.stderr and words in r.stderr, r.stderr
+    code, _, err = _cli(
+        "eval.__main__", *EVAL, "--agents", "oracle", "--out", str(out), *change, capsys=capsys
+    )
+    assert code == 2, err[-2000:]
+    assert "holds records made with other settings" in err and words in err, err
     assert (out / "episodes.jsonl").read_bytes() == before
 
 
-def test_one_evaluation_at_a_time_and_a_killed_one_leaves_no_lock(faulty_eval, tmp_path):
+def test_one_evaluation_at_a_time_and_a_killed_one_leaves_no_lock(faulty_eval, capsys):
     from cfvs_maniskill.eval.results import ResultsError, exclusive
 
     path = faulty_eval / "episodes.jsonl"
@@ -238,8 +258,10 @@ def test_one_evaluation_at_a_time_and_a_killed_one_leaves_no_lock(faulty_eval, t
     )  # fmt: skip
     try:
         assert holder.stdout.readline().strip() == "held"
-        r = run_cli("cfvs_maniskill.eval", *EVAL, "--agents", "oracle", "--out", str(faulty_eval))
-        assert r.returncode == 2 and f"process {holder.pid} is writing" in r.stderr, r.stderr
+        code, _, err = _cli(
+            "eval.__main__", *EVAL, "--agents", "oracle", "--out", str(faulty_eval), capsys=capsys
+        )
+        assert code == 2 and f"process {holder.pid} is writing" in err, err
         with pytest.raises(ResultsError, match="is writing these results"), exclusive(path):
             pass
     finally:
@@ -249,26 +271,28 @@ def test_one_evaluation_at_a_time_and_a_killed_one_leaves_no_lock(faulty_eval, t
         pass
 
 
-def test_run_out_twice_records_each_episode_once(tmp_path):
+def test_run_out_twice_records_each_episode_once(tmp_path, capsys):
     out = tmp_path / "run.jsonl"
     args = ["--task", "PegInsert3DoF", "--agent", "oracle", "--episodes", "2", "--out", str(out)]
-    assert run_cli("cfvs_maniskill.run", *args).returncode == 0
-    r = run_cli("cfvs_maniskill.run", *args[:-3], "3", "--out", str(out))
-    assert r.returncode == 0, r.stderr[-2000:]
-    assert "2 of the 3 episodes are in" in r.stdout
+    assert _cli("run", *args, capsys=capsys)[0] == 0
+    code, stdout, err = _cli("run", *args[:-3], "3", "--out", str(out), capsys=capsys)
+    assert code == 0, err[-2000:]
+    assert "2 of the 3 episodes are in" in stdout
     keys = [rec["key"] for rec in _lines(out)]
     assert len(keys) == 3 == len(set(keys))
 
 
 @pytest.mark.parametrize("damage", ["corrupt gz", "results is a folder", "out is a file"])
-def test_damaged_results_folders_are_named(faulty_eval, tmp_path, damage):
+def test_damaged_results_folders_are_named(faulty_eval, tmp_path, damage, capsys):
     from cfvs_maniskill.eval.results import ResultsError, append, read_done
 
     out = tmp_path / "out"
     if damage == "out is a file":
         out.write_text("")
-        r = run_cli("cfvs_maniskill.eval", *EVAL, "--agents", "oracle", "--out", str(out))
-        assert r.returncode == 2 and f"--out {out}: cannot be a results folder" in r.stderr
+        code, _, err = _cli(
+            "eval.__main__", *EVAL, "--agents", "oracle", "--out", str(out), capsys=capsys
+        )
+        assert code == 2 and f"--out {out}: cannot be a results folder" in err, err
         return
     shutil.copytree(faulty_eval, out)
     path = out / "episodes.jsonl"
@@ -285,10 +309,10 @@ def test_damaged_results_folders_are_named(faulty_eval, tmp_path, damage):
             append(path, {"key": "x"})
 
 
-def test_a_grid_too_large_is_refused_before_it_is_built():
-    r = run_cli(
-        "cfvs_maniskill.eval", "--tasks", "PegInsert3DoF", "--agents", "oracle",
-        "--episodes-per-object", "10000000", "--out", "/nonexistent/never/written",
+def test_a_grid_too_large_is_refused_before_it_is_built(capsys):
+    code, _, err = _cli(
+        "eval.__main__", "--tasks", "PegInsert3DoF", "--agents", "oracle",
+        "--episodes-per-object", "10000000", "--out", "/nonexistent/never/written", capsys=capsys,
     )  # fmt: skip
-    assert r.returncode == 2 and "jobs; one evaluation takes at most 100000" in r.stderr
+    assert code == 2 and "jobs; one evaluation takes at most 100000" in err, err
     assert not Path("/nonexistent").exists()  # (10^8 jobs built first would not fit in memory)

@@ -44,8 +44,8 @@ class RunArgs:
     """Initial peg-to-hole distance: small (15 cm) or large (30 cm)."""
     out: Path | None = None
     """Append one JSON line per episode to this file. Each record is keyed by (task, agent,
-    initial error, seed, sensor, search radius): run again, an episode already there is
-    skipped, so no report counts it twice; one run at a time per file (a lock)."""
+    initial error, seed, sensor, search radius, objects): run again, an episode already there
+    is skipped, so no report counts it twice; one run at a time per file (a lock)."""
     video: Path | None = None
     """Write one mp4 per episode into this directory: a lit close view of the hole, an
     overview and the wrist camera with the agent's estimated hole frame, captioned with the
@@ -139,7 +139,11 @@ def main(args: RunArgs) -> list:
 
 def run_key(label: str, args: RunArgs, seed: int) -> str:
     """A run record's key: everything that decides the episode besides the code and files."""
-    return f"run|{label}|{args.agent}|{args.init_error}|{seed}|{args.sensor}|{args.search_radius}"
+    objects = ",".join(args.objects) or "task"  # the selection the seed draws the object from
+    return (
+        f"run|{label}|{args.agent}|{args.init_error}|{seed}|{args.sensor}|{args.search_radius}"
+        f"|{objects}"
+    )
 
 
 def _episodes(args: RunArgs, session, film, label: str, seeds: list[int], key) -> list:

@@ -162,9 +162,10 @@ def sensor_files(sensors: tuple[str, ...]) -> dict[str, tuple[str, str]]:
     out = {}
     for s in sensors:
         try:
-            out[load_profile(s).name] = (s, str(load_profile(s).source))
+            profile = load_profile(s)
         except ValueError as e:
             _fail(str(e))
+        out[profile.name] = (s, str(profile.source))
     return out
 
 

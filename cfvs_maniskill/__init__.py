@@ -1,21 +1,21 @@
 """CFVS coarse-to-fine visual servoing for 6-DoF peg-in-hole, as a ManiSkill 3 task plugin.
 
-Importing the package picks the rendering device (GPU, else SwiftShader on the CPU: set it
-up with `cfvs-maniskill setup-render`) before SAPIEN starts, registers the UR5 robots and one env per task file in `tasks/`
-(`PegInsert3DoF-v1`, ...). Vocabulary: in ManiSkill an "agent" is the robot; here the robot
-lives in `robots/` and an *agent* is a policy (`agents/`).
+Importing the package registers one gym env id per task file in `tasks/`
+(`PegInsert3DoF-v1`, ...) and loads nothing heavy: the simulator (ManiSkill, SAPIEN, torch)
+and the rendering device (a GPU, else SwiftShader on the CPU: set it up with
+`cfvs-maniskill setup-render`) are chosen when an env is first made. Vocabulary: in
+ManiSkill an "agent" is the robot; here the robot lives in `robots/` and an *agent* is a
+policy (`agents/`).
 """
 
-from cfvs_maniskill.rendering import device as _device
+import warnings
 
-if _device.configure() == "missing":
-    # One clear error now, instead of a Vulkan failure deep in the first env's creation.
-    raise _device.RenderDeviceError(_device.missing_message())
-
-from cfvs_maniskill import robots  # noqa: E402,F401  (registers the UR5 agents)
+from cfvs_maniskill.envs.registration import register_tasks as _register_tasks
 
 __version__ = "0.1.0"
 
-from cfvs_maniskill.envs.registration import register_tasks as _register_tasks  # noqa: E402
+# SAPIEN falls back to its bundled Vulkan loader, which works; its warning only confuses.
+warnings.filterwarnings("ignore", message="Failed to find system libvulkan")
 
 TASKS = _register_tasks()
+"""Every registered task by name (bundled and in the user folder) -> its TaskConfig."""

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-import sapien
 from scipy.spatial.transform import Rotation, Slerp
+
+if TYPE_CHECKING:  # SAPIEN only for its Pose type: geometry is used without the simulator
+    import sapien
 
 
 def to_matrix(pose: sapien.Pose) -> np.ndarray:
@@ -50,6 +53,8 @@ def quaternion(R: np.ndarray) -> tuple[float, float, float, float]:
 
 
 def to_pose(T: np.ndarray) -> sapien.Pose:
+    import sapien
+
     return sapien.Pose(p=T[:3, 3].astype(np.float32), q=quaternion(T[:3, :3]))
 
 

@@ -68,27 +68,36 @@ class _TooBig(yaml.YAMLError):
 def read_yaml(path: Path | str, error: type[FileFieldError] = FileFieldError) -> Any:
     """A user's YAML file, bounded before anything walks it (size, nesting, values, no
     aliases); any problem is `error(file, "<file>" or "<top>", what is wrong)`."""
+    return parse_yaml(read_text(path, error), path, error)
+
+
+def read_text(path: Path | str, error: type[FileFieldError] = FileFieldError) -> str:
+    """A user's text file of at most MAX_FILE_BYTES, as UTF-8; else `error` naming it."""
     path = Path(path)
     try:
         size = path.stat().st_size
         if size > MAX_FILE_BYTES:
             raise error(path, "<file>", f"{size} bytes; a file of at most {MAX_FILE_BYTES} bytes")
-        text = path.read_bytes().decode()
+        return path.read_bytes().decode()
     except OSError as e:
         raise error(path, "<file>", f"cannot read: {e.strerror or e}") from None
     except UnicodeDecodeError as e:
         raise error(path, "<file>", f"not UTF-8 text: {e.reason} at byte {e.start}") from None
+
+
+def parse_yaml(text: str, path: Path | str, error: type[FileFieldError] = FileFieldError) -> Any:
+    """`text` (the file `path`'s) as YAML, bounded as `read_yaml` says."""
     loader = _BoundedLoader(text)
     try:
         return loader.get_single_data()
     except _TooBig as e:
-        raise error(path, "<top>", str(e)) from None
+        raise error(Path(path), "<top>", str(e)) from None
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""
-        raise error(path, "<top>", f"not valid YAML{where}: {e}") from None
+        raise error(Path(path), "<top>", f"not valid YAML{where}: {e}") from None
     except (ValueError, RecursionError) as e:  # e.g. an integer of 10^5 digits
-        raise error(path, "<top>", f"not readable YAML: {type(e).__name__}: {e}") from None
+        raise error(Path(path), "<top>", f"not readable YAML: {type(e).__name__}: {e}") from None
     finally:
         loader.dispose()
 

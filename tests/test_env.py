@@ -3,6 +3,7 @@ determinism and the oracle."""
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -20,6 +21,17 @@ TASKS = ["PegInsert3DoF-v1", "PegInsert4DoF-v1", "PegInsert6DoF-v1"]
 def test_render_device_is_chosen_without_user_setup():
     assert device.configure() in ("gpu", "swiftshader")
     assert "cfvs-maniskill setup-render" in device.missing_message()
+
+
+def test_without_a_renderer_making_an_env_names_the_set_up_command(monkeypatch):
+    """The package imports without a renderer; making an env is what needs one."""
+    for var in ("VK_ICD_FILENAMES", "CFVS_RENDER_DEVICE", "CFVS_SWIFTSHADER_ICD"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setattr(device, "_state", {})
+    monkeypatch.setattr(device, "_has_gpu_node", lambda: False)
+    monkeypatch.setattr(device, "swiftshader_icd_candidates", lambda: [])
+    with pytest.raises(device.RenderDeviceError, match="cfvs-maniskill setup-render"):
+        gym.make("PegInsert6DoF-v1", obs_mode="pointcloud")
 
 
 @pytest.mark.parametrize("env_id", TASKS)

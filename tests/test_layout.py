@@ -4,7 +4,12 @@ reads the camera through `perception/`, and neither imports the other."""
 from __future__ import annotations
 
 import ast
+import json
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 PKG = Path(__file__).resolve().parent.parent / "cfvs_maniskill"
 
@@ -90,3 +95,58 @@ def test_no_module_imports_from_a_higher_layer():
 def _has_layer(module: str) -> bool:
     name = module.removeprefix("cfvs_maniskill.")
     return name.split(".")[0] in LAYERS
+
+
+HEAVY = ("sapien", "mani_skill", "torch", "open3d")
+"""The simulator, the renderer and the learning stack: loaded when an env or a network is
+made, never by importing the package or its lowest layer."""
+WITHOUT_SIMULATOR = ("cfvs_maniskill.report.load", "cfvs_maniskill.report.tables",
+                     "cfvs_maniskill.report.paper", "cfvs_maniskill.eval.results",
+                     "cfvs_maniskill.eval.summary", "cfvs_maniskill.envs.lookup")  # fmt: skip
+"""Reading records and tasks and writing the report's tables: no simulator, no renderer."""
+
+
+def _modules() -> list[str]:
+    out = []
+    for f in sorted(PKG.rglob("*.py")):
+        if "bundled" in f.parts or f.name == "__main__.py":  # __main__ runs its CLI
+            continue
+        rel = f.relative_to(PKG).with_suffix("")
+        out.append(".".join(("cfvs_maniskill", *rel.parts)).removesuffix(".__init__"))
+    return out
+
+
+def _loaded_by(modules: list[str]) -> set[str]:
+    """sys.modules of a fresh interpreter after importing `modules`."""
+    code = f"import importlib, json, sys\nfor m in {modules!r}:\n    importlib.import_module(m)\n"
+    code += "print(json.dumps(sorted(sys.modules)))"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return set(json.loads(r.stdout.strip().splitlines()[-1]))
+
+
+def test_importing_the_package_loads_nothing_heavy():
+    loaded = _loaded_by(["cfvs_maniskill"])
+    assert not {m.split(".")[0] for m in loaded} & set(HEAVY)
+    import gymnasium as gym
+
+    import cfvs_maniskill
+
+    assert {t.env_id for t in cfvs_maniskill.TASKS.values()} <= set(gym.registry)
+
+
+@pytest.mark.parametrize("layer", sorted(set(LAYERS.values())))
+def test_importing_a_layer_loads_nothing_above_it(layer):
+    """At run time: a fresh interpreter importing every module of `layer` and below loads no
+    module of a higher layer (beyond the light registration the package root always runs)."""
+    root = _loaded_by(["cfvs_maniskill"])
+    loaded = _loaded_by([m for m in _modules() if _layer(m) <= layer])
+    above = sorted(m for m in loaded - root if m.startswith("cfvs_maniskill") and _layer(m) > layer)
+    assert not above, f"importing layer {layer} loads {above}"
+    if layer == 0:
+        assert not {m.split(".")[0] for m in loaded} & set(HEAVY)
+
+
+def test_records_and_tables_need_no_simulator():
+    loaded = _loaded_by(list(WITHOUT_SIMULATOR))
+    assert not {m.split(".")[0] for m in loaded} & set(HEAVY)

@@ -89,9 +89,10 @@ def test_wheel_carries_what_a_user_needs_and_nothing_else(wheel):
 
 
 def test_installed_package_runs_from_another_folder(user, tmp_path):
-    # 0. Without a renderer, importing the package says which command sets one up. (One
-    # test for the whole flow: the fresh environment takes minutes to install.)
-    r = _run(user, "-c", "import cfvs_maniskill")
+    # 0. Without a renderer the package imports, and making an env says which command sets
+    # one up. (One test for the whole flow: the fresh environment takes minutes to install.)
+    assert _run(user, "-c", "import cfvs_maniskill").returncode == 0
+    r = _run(user, "-c", "import gymnasium as g, cfvs_maniskill; g.make('PegInsert6DoF-v1')")
     assert r.returncode != 0
     assert "RenderDeviceError" in r.stderr and "cfvs-maniskill setup-render" in r.stderr
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cfvs_maniskill.envs.registration import GENERIC_ID, TASKS
 from cfvs_maniskill.envs.task_config import INVALID, TaskConfig, TaskConfigError, load_task
 
 
@@ -15,7 +16,6 @@ def find_task(spec: str | Path) -> TaskConfig:
     """`PegInsert6DoF`, `PegInsert6DoF-v1` (bundled or in the user folder) or a task file's
     path. A file named like a registered task must hold the same task: its records would
     otherwise be counted as that task's."""
-    from cfvs_maniskill import TASKS
     from cfvs_maniskill.provenance import sha256
 
     base = str(spec).removesuffix("-v1")
@@ -48,9 +48,6 @@ def find_task(spec: str | Path) -> TaskConfig:
 
 def make_args(cfg: TaskConfig) -> tuple[str, dict]:
     """The env id and keywords that `gym.make` builds `cfg`'s env with."""
-    from cfvs_maniskill import TASKS
-    from cfvs_maniskill.envs.registration import GENERIC_ID
-
     if TASKS.get(cfg.name) is cfg:
         return cfg.env_id, {}
     return GENERIC_ID, {"task_file": cfg.source, "max_episode_steps": cfg.max_episode_steps}

@@ -41,7 +41,7 @@ from pydantic import Field
 from cfvs_maniskill.constants import PEG_PROFILES
 from cfvs_maniskill.errors import FileFieldError
 from cfvs_maniskill.sensing.surfaces import DEFAULT_PART_MATERIAL, MATERIALS, contrast_of
-from cfvs_maniskill.validation import STRICT, read_yaml, validate
+from cfvs_maniskill.validation import STRICT, parse_yaml, read_text, validate
 
 SPLITS = ("train", "test")
 BODY_KINDS = ("box", "cylinder", "prism", "mesh")
@@ -250,6 +250,5 @@ def load_spec(path: Path | str) -> HoleSpec:
         path = Path(path).resolve()
     except (OSError, RuntimeError) as e:  # a symlink loop: RuntimeError before Python 3.13
         raise HoleSpecError(path, "<file>", f"cannot resolve the path: {e}") from None
-    data = read_yaml(path, HoleSpecError)  # bounded: size, nesting, no aliases
-    text = path.read_text()
-    return parse_spec(data, path, text)
+    text = read_text(path, HoleSpecError)
+    return parse_spec(parse_yaml(text, path, HoleSpecError), path, text)  # bounded YAML

@@ -7,16 +7,19 @@ Vulkan loader at a SwiftShader ICD, so nobody has to export variables by hand.
 
 Environment overrides:
   CFVS_RENDER_DEVICE=gpu|swiftshader|none   force the choice (none: physics only, no
-    camera observations; the package then imports without any Vulkan driver).
+    camera observations).
   CFVS_SWIFTSHADER_ICD=/path/vk_swiftshader_icd.json   use this ICD file.
+  CFVS_RENDER_LOG=/path/file   keep what the Vulkan driver prints (else it is dropped).
 """
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import os
 import sys
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 SWIFTSHADER_BACKEND = "swiftshader"
@@ -140,3 +143,22 @@ def describe() -> str:
     if kind == "none":
         return "no rendering (CFVS_RENDER_DEVICE=none): physics only"
     return "no rendering device found: " + missing_message()
+
+
+@contextlib.contextmanager
+def driver_output_to_log() -> Iterator[None]:
+    """Send what C code prints to stderr (SwiftShader's "UNSUPPORTED" lines while SAPIEN
+    makes its device) to $CFVS_RENDER_LOG, else nowhere; Python's own messages, warnings
+    and tracebacks still reach the terminal."""
+    sys.stderr.flush()
+    terminal = os.dup(2)
+    with open(os.environ.get("CFVS_RENDER_LOG") or os.devnull, "a") as log:
+        os.dup2(log.fileno(), 2)
+    python_stderr, sys.stderr = sys.stderr, os.fdopen(os.dup(terminal), "w", buffering=1)
+    try:
+        yield
+    finally:
+        sys.stderr.close()
+        sys.stderr = python_stderr
+        os.dup2(terminal, 2)
+        os.close(terminal)

@@ -46,9 +46,9 @@ def measure(args: Args) -> tuple[list[Figure], str]:
     import gymnasium as gym
 
     import cfvs_maniskill  # noqa: F401
-    from cfvs_maniskill.agents.registry import make_agent
     from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.policies.registry import make_agent
 
     torch.set_num_threads(args.threads)
     env = gym.make("PegInsert6DoF-v1", obs_mode="pointcloud", objects=["test"])

@@ -55,14 +55,15 @@ def lateral_mm(F: np.ndarray, H: np.ndarray) -> float:
 def main(args: Args) -> dict:
     import torch
 
-    from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
-    from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.constants import hole_half_extent
-    from cfvs_maniskill.data.collect import fine_start
     from cfvs_maniskill.envs.lookup import find_task
     from cfvs_maniskill.perception import labels as L
     from cfvs_maniskill.perception.clouds import fine_crop, object_points, tool_to_world
     from cfvs_maniskill.perception.opening import fit_opening
+    from cfvs_maniskill.policies.cfvs.agent import CFVSAgent
+    from cfvs_maniskill.policies.cfvs.collect import fine_start
+    from cfvs_maniskill.policies.cfvs.config import CFVSConfig
+    from cfvs_maniskill.policies.interface import TaskSpec
     from cfvs_maniskill.session import make_env
 
     task = find_task(args.task)

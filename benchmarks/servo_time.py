@@ -12,9 +12,9 @@ def measure(episodes: int = 20) -> tuple[list[Figure], str]:
     import gymnasium as gym
     import torch
 
-    from cfvs_maniskill.agents.registry import make_agent
     from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.policies.registry import make_agent
 
     torch.set_num_threads(1)
     env = gym.make("PegInsert3DoF-v1", obs_mode="pointcloud", objects=["test"])

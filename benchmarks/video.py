@@ -19,9 +19,9 @@ def measure(seeds: tuple[int, ...] = SEEDS) -> tuple[list[Figure], str]:
     import gymnasium as gym
 
     import cfvs_maniskill  # noqa: F401
-    from cfvs_maniskill.agents.registry import make_agent
     from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.policies.registry import make_agent
     from cfvs_maniskill.rendering.film import Film
 
     env = gym.make("PegInsert6DoF-v1", obs_mode="pointcloud", objects=["test"])

@@ -11,8 +11,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cfvs_maniskill import provenance
-from cfvs_maniskill.agents.base import Agent, AgentFailure, Observation, checked_action
-from cfvs_maniskill.agents.interface import robot_view
 from cfvs_maniskill.constants import (
     INSERT_OVERSHOOT,
     PRE_INSERT_HEIGHT,
@@ -22,6 +20,8 @@ from cfvs_maniskill.constants import (
 )
 from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.envs.scene import max_tilt_deg
+from cfvs_maniskill.policies.base import Agent, AgentFailure, Observation, checked_action
+from cfvs_maniskill.policies.interface import robot_view
 
 if TYPE_CHECKING:
     from cfvs_maniskill.rendering.film import Film

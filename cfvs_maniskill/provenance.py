@@ -39,7 +39,7 @@ def code_version() -> str:
 
 
 NOT_EPISODE_CODE = (
-    *("report/", "data/", "train.py", "train_kovis.py", "diagnose_kovis.py"),
+    *("report/", "data/", "policies/dataset.py"),
     "bundled/",  # links to the user-file folders: hashed file by file in each record
     # Orchestration: which jobs run, where, and how their records are kept; an episode's
     # outcome is decided by the worker, the session and what they call.
@@ -48,6 +48,15 @@ NOT_EPISODE_CODE = (
 )
 """Package paths that never decide an episode (tables, training, dataset collection, the
 evaluation's orchestration), so their changes leave records current."""
+POLICY_TOOLS = ("collect.py", "train.py", "diagnose.py")
+"""A policy folder's dataset collection, training and diagnosis: not episode code either."""
+
+
+def is_episode_code(path: str) -> bool:
+    """Whether the module at `path` (in the package) can decide an episode."""
+    if not path.endswith(".py") or path.startswith(NOT_EPISODE_CODE):
+        return False
+    return not (path.startswith("policies/") and path.rsplit("/", 1)[-1] in POLICY_TOOLS)
 
 
 def _is_text(stmt: ast.stmt) -> bool:
@@ -65,7 +74,7 @@ def fingerprint(sources: Iterable[tuple[str, bytes]]) -> str:
     what runs moves it."""
     h = hashlib.sha256()
     for path, src in sorted(sources):
-        if not path.endswith(".py") or path.startswith(NOT_EPISODE_CODE):
+        if not is_episode_code(path):
             continue
         tree = ast.parse(src)
         for node in ast.walk(tree):

@@ -72,9 +72,9 @@ def resolve_task(spec: str):
 
 
 def main(args: RunArgs) -> list:
-    from cfvs_maniskill.agents.registry import resolve_agent
     from cfvs_maniskill.eval.results import ResultsError, exclusive, read_done
     from cfvs_maniskill.objects.library import SelectionError
+    from cfvs_maniskill.policies.registry import resolve_agent
     from cfvs_maniskill.session import make_env, open_session
 
     task = resolve_task(args.task)

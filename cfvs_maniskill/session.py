@@ -26,8 +26,8 @@ def make_env(
     the task's list) and the sensor profile (a name or a file); `options` go to gym.make."""
     import gymnasium as gym
 
-    from cfvs_maniskill.agents.registry import agent_env_kwargs
     from cfvs_maniskill.envs.lookup import find_task, make_args
+    from cfvs_maniskill.policies.registry import agent_env_kwargs
 
     env_id, task_kwargs = make_args(task if isinstance(task, TaskConfig) else find_task(task))
     return gym.make(
@@ -59,8 +59,8 @@ class Session:
 def open_session(env, agent: str, search_radius: float = DEFAULT_SEARCH_RADIUS) -> Session:
     """The agent `agent` (a registry name, `cfvs@DIR` or `package.module:Class`) and a
     controller with this compliant-search radius, on `env` (from `make_env`)."""
-    from cfvs_maniskill.agents.registry import make_agent
     from cfvs_maniskill.control.executor import Executor, ExecutorConfig
+    from cfvs_maniskill.policies.registry import make_agent
 
     executor = Executor(env, ExecutorConfig(search_radius=search_radius))
     return Session(env, make_agent(agent, env), executor)

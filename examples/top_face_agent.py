@@ -7,9 +7,9 @@ of the object's top face. Right for centred holes in upright parts (3-DoF), wron
 
 import numpy as np
 
-from cfvs_maniskill.agents.base import Action, Agent, Observation
-from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.perception.clouds import object_points, tool_to_world
+from cfvs_maniskill.policies.base import Action, Agent, Observation
+from cfvs_maniskill.policies.interface import TaskSpec, insertion_pose
 
 
 class TopFaceAgent(Agent):

@@ -52,10 +52,11 @@ def held_out_outcomes(
     of one scene on held-out object `obj` (from `assets/<folder>`) for each CFVS agent of
     `configs` (label -> CFVSConfig keyword arguments): a paired comparison on the same env
     and seed."""
-    from cfvs_maniskill.agents.cfvs import CFVSAgent, CFVSConfig
-    from cfvs_maniskill.agents.interface import TaskSpec
     from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.episode import run_episode
+    from cfvs_maniskill.policies.cfvs.agent import CFVSAgent
+    from cfvs_maniskill.policies.cfvs.config import CFVSConfig
+    from cfvs_maniskill.policies.interface import TaskSpec
 
     assets = str(ROOT / "assets" / folder)
     env = make_env(env_id, obs_mode="pointcloud", objects=(obj,), assets=(assets,))

@@ -7,7 +7,7 @@ import os
 import signal
 import time
 
-from cfvs_maniskill.agents.base import Action, Agent, Observation
+from cfvs_maniskill.policies.base import Action, Agent, Observation
 
 
 class CrashingAgent(Agent):

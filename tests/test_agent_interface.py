@@ -11,12 +11,12 @@ import pytest
 import sapien
 import torch
 
-from cfvs_maniskill.agents.base import Agent, Observation
-from cfvs_maniskill.agents.interface import ALLOWED_OBS, TaskSpec
-from cfvs_maniskill.agents.registry import AGENTS, PRIVILEGED, agent_env_kwargs, make_agent
 from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.envs.task_config import TaskConfig
 from cfvs_maniskill.episode import agent_seed, run_episode
+from cfvs_maniskill.policies.base import Agent, Observation
+from cfvs_maniskill.policies.interface import ALLOWED_OBS, TaskSpec
+from cfvs_maniskill.policies.registry import AGENTS, PRIVILEGED, agent_env_kwargs, make_agent
 from cfvs_maniskill.robots.ur5 import STEREO_UIDS
 
 ENV_ID = "PegInsert6DoF-v1"
@@ -169,7 +169,8 @@ def test_cfvs_with_a_weights_folder_loads_those_files(make_env, tmp_path):
     another layout), the same forward as the shipped agent; a missing folder is named."""
     import shutil
 
-    from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, weights_for
+    from cfvs_maniskill.policies.cfvs.agent import weights_for
+    from cfvs_maniskill.policies.cfvs.config import WEIGHTS_DIR
 
     env = make_env(ENV_ID, obs_mode="pointcloud")
     shipped = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR)

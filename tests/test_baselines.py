@@ -13,15 +13,15 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.base import Action, Observation
-from cfvs_maniskill.agents.hole_detect import HoleDetectConfig, detect_hole
-from cfvs_maniskill.agents.icp import ICPAgent, ICPConfig
-from cfvs_maniskill.agents.interface import TaskSpec
-from cfvs_maniskill.agents.registry import agent_env_kwargs, make_agent
 from cfvs_maniskill.constants import hole_half_extent
 from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.envs.peg_insert import PARK
 from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.policies.base import Action, Observation
+from cfvs_maniskill.policies.hole_detect.agent import HoleDetectConfig, detect_hole
+from cfvs_maniskill.policies.icp.agent import ICPAgent, ICPConfig
+from cfvs_maniskill.policies.interface import TaskSpec
+from cfvs_maniskill.policies.registry import agent_env_kwargs, make_agent
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -166,7 +166,7 @@ def test_kovis_diagnosis_compares_each_decision_with_the_truth(tmp_path):
     distance bins and writes both files; the weights it measured are named and hashed."""
     import json
 
-    from cfvs_maniskill.diagnose_kovis import DiagnoseArgs, diagnose
+    from cfvs_maniskill.policies.kovis.diagnose import DiagnoseArgs, diagnose
 
     out = diagnose(DiagnoseArgs(episodes=1, out=tmp_path))
     assert [e["init"] for e in out["episodes"]] == ["small", "large"]
@@ -181,7 +181,7 @@ def test_kovis_speed_bootstrapping_keeps_what_is_left_to_learn():
     """The speed loss keeps the hardest samples by BCE minus the soft target's entropy: a
     sample already at its target 0.5 (highest BCE, nothing to learn) is dropped in favour of
     one predicted 0.3 for a target 0.01, and its gradient is zero."""
-    from cfvs_maniskill.nets.kovis import _entropy, _hardest
+    from cfvs_maniskill.policies.kovis.model import _entropy, _hardest
 
     target = torch.tensor([0.5, 0.01])
     logit = torch.logit(torch.tensor([0.5, 0.3])).requires_grad_()

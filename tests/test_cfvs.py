@@ -12,14 +12,16 @@ import pytest
 import torch
 
 from cfvs_maniskill import resources
-from cfvs_maniskill.agents.cfvs import WEIGHTS_DIR, CFVSAgent, CFVSConfig, weights_for
-from cfvs_maniskill.agents.interface import TaskSpec
 from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.episode import run_episode
-from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
-from cfvs_maniskill.nets.oakn import weighted_keypoints
+from cfvs_maniskill.nets.checkpoint import WeightsError
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import fine_crop, object_points, sample_fixed
+from cfvs_maniskill.policies.cfvs.agent import CFVSAgent, weights_for
+from cfvs_maniskill.policies.cfvs.config import WEIGHTS_DIR, CFVSConfig
+from cfvs_maniskill.policies.cfvs.oakn import weighted_keypoints
+from cfvs_maniskill.policies.interface import TaskSpec
+from cfvs_maniskill.policies.networks import load_weights
 
 from .conftest import run_cli
 
@@ -120,7 +122,7 @@ def test_a_weights_file_holding_code_is_refused_before_it_runs(tmp_path):
     """A weights file with pickled code (here: a call that creates a file), however
     ours it looks, is refused by `run --agent cfvs@DIR` with exit 2 naming the file, and the
     code never runs; so is a training resume state."""
-    from cfvs_maniskill.train import resume_state
+    from cfvs_maniskill.policies.cfvs.train import resume_state
 
     marker = tmp_path / "code_ran"
     files = weights_for("PegInsert6DoF", "square", WEIGHTS_DIR)
@@ -185,7 +187,7 @@ def test_cfvs_inserts_on_unseen_objects(make_env, env_id):
 
 
 def test_agent_gives_up_with_a_reason_when_it_sees_nothing(make_env):
-    from cfvs_maniskill.agents.base import Observation
+    from cfvs_maniskill.policies.base import Observation
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
     env.reset(seed=3)
@@ -203,11 +205,11 @@ def test_a_blind_fine_look_turns_the_wrist_to_each_other_yaw_then_gives_up(make_
     """A fine look that sees nothing: the same pre-insertion pose at each other yaw of the
     square (90 deg apart, the camera on another side), then a give-up; 3-DoF keeps its yaw
     and the `no_turn` ablation gives up at once."""
-    from cfvs_maniskill.agents.base import Observation
-    from cfvs_maniskill.agents.cfvs import ablation_config
-    from cfvs_maniskill.agents.interface import insertion_pose
     from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
     from cfvs_maniskill.envs.task_config import load_task
+    from cfvs_maniskill.policies.base import Observation
+    from cfvs_maniskill.policies.cfvs.config import ablation_config
+    from cfvs_maniskill.policies.interface import insertion_pose
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
     env.reset(seed=3)
@@ -292,7 +294,7 @@ def test_fine_step_moves_on_one_vote_far_from_the_pose_and_averages_all_near_it(
 
 @pytest.mark.parametrize("final_correction", [True, False])
 def test_small_offset_is_moved_by_once_then_inserted(make_env, final_correction):
-    from cfvs_maniskill.agents.base import Observation
+    from cfvs_maniskill.policies.base import Observation
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
     obs, _ = env.reset(seed=3)
@@ -316,7 +318,7 @@ def test_small_offset_is_moved_by_once_then_inserted(make_env, final_correction)
 
 def test_each_ablation_changes_its_component_alone():
     """An ablation flips its switch and, with it, only the switches that refine it."""
-    from cfvs_maniskill.agents.cfvs import ABLATIONS, REQUIRES, ablation_config
+    from cfvs_maniskill.policies.cfvs.config import ABLATIONS, REQUIRES, ablation_config
 
     default = dataclasses.asdict(CFVSConfig())
     switches = {k for k, v in default.items() if isinstance(v, bool)}
@@ -345,8 +347,8 @@ def test_a_switch_without_the_one_it_refines_is_refused(fields, named):
 
 
 def test_registry_lists_the_paper_agents_and_makes_every_ablation():
-    from cfvs_maniskill.agents.cfvs import ablation_config
-    from cfvs_maniskill.agents.registry import AGENTS, ablation_names, resolve_agent
+    from cfvs_maniskill.policies.cfvs.config import ablation_config
+    from cfvs_maniskill.policies.registry import AGENTS, ablation_names, resolve_agent
 
     assert len(AGENTS) <= 10
     from cfvs_maniskill import TASKS

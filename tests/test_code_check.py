@@ -36,7 +36,7 @@ def test_the_fingerprint_is_the_running_code_and_moves_only_with_what_runs():
     }
     assert fingerprint(sources(same)) == code_fingerprint()
     # A changed number in an agent: another decision, another fingerprint.
-    moved = {"agents/cfvs.py": ("MAX_TURNS = 3", "MAX_TURNS = 2")}
+    moved = {"policies/cfvs/agent.py": ("MAX_TURNS = 3", "MAX_TURNS = 2")}
     assert fingerprint(sources(moved)) != code_fingerprint()
     # The report's code never runs in an episode.
     report = {"report/tables.py": ('INITS = ("small", "large")', 'INITS = ("large", "small")')}
@@ -55,7 +55,7 @@ def test_check_names_the_cells_a_branch_changing_an_agent_leaves_stale(monkeypat
     assert check(records, [], ROOT / "README.md") == 0, capsys.readouterr().out[-2000:]
     capsys.readouterr()
 
-    branch = fingerprint(sources({"agents/cfvs.py": ("MAX_TURNS = 3", "MAX_TURNS = 2")}))
+    branch = fingerprint(sources({"policies/cfvs/agent.py": ("MAX_TURNS = 3", "MAX_TURNS = 2")}))
     monkeypatch.setattr(trace, "code_fingerprint", lambda: branch)
     assert check(records, [], None) == 1
     out = capsys.readouterr().out
@@ -63,7 +63,9 @@ def test_check_names_the_cells_a_branch_changing_an_agent_leaves_stale(monkeypat
     assert "NOT today's episode code" in out
 
     docs_only = fingerprint(
-        sources({"agents/cfvs.py": ('"""The config of ablation `name`', '"""Ablation `name`')})
+        sources(
+            {"policies/cfvs/agent.py": ('"""The config of ablation `name`', '"""Ablation `name`')}
+        )
     )
     monkeypatch.setattr(trace, "code_fingerprint", lambda: docs_only)
     assert check(records, [], None) == 0

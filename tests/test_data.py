@@ -273,9 +273,9 @@ def test_kovis_rollouts_are_stereo_pairs_with_the_motion_to_the_goal(kovis_file)
 def test_kovis_training_resumes_where_it_stopped(kovis_file, tmp_path):
     """Stopped by --max-minutes after its first batch and run again, KOVIS training ends in
     the same weights as one uninterrupted run (same batches, same augmentation draws)."""
-    from cfvs_maniskill.nets.checkpoint import load_weights
-    from cfvs_maniskill.train_kovis import TrainKOVISArgs
-    from cfvs_maniskill.train_kovis import train as train_kovis
+    from cfvs_maniskill.policies.kovis.train import TrainKOVISArgs
+    from cfvs_maniskill.policies.kovis.train import train as train_kovis
+    from cfvs_maniskill.policies.networks import load_weights
 
     def args(out, minutes=0.0):
         return TrainKOVISArgs(
@@ -301,16 +301,16 @@ def test_kovis_training_resumes_where_it_stopped(kovis_file, tmp_path):
 def test_training_writes_weights_that_load(coarse_file, kovis_file, tmp_path):
     """Both training commands end in a weights file that the agents' loader accepts, with
     its command and metrics beside it."""
-    from cfvs_maniskill.nets.checkpoint import load_weights
-    from cfvs_maniskill.train import TrainArgs
-    from cfvs_maniskill.train import train as train_cfvs
-    from cfvs_maniskill.train_kovis import TrainKOVISArgs
-    from cfvs_maniskill.train_kovis import train as train_kovis
+    from cfvs_maniskill.policies.cfvs.train import TrainArgs
+    from cfvs_maniskill.policies.cfvs.train import train as train_cfvs
+    from cfvs_maniskill.policies.kovis.train import TrainKOVISArgs
+    from cfvs_maniskill.policies.kovis.train import train as train_kovis
+    from cfvs_maniskill.policies.networks import load_weights
 
     out = tmp_path / "oakn.pt"
     train_cfvs(TrainArgs(net="oakn", data=(coarse_file,), out=out, epochs=1, batch=4, points=128))
     _, meta = load_weights(out, "oakn", "square")
-    assert meta["command"].startswith("python -m cfvs_maniskill.train")
+    assert meta["command"].startswith("python -m cfvs_maniskill.policies.cfvs.train")
     assert out.with_suffix(".json").is_file()
     out = tmp_path / "square.pt"
     train_kovis(
@@ -324,9 +324,10 @@ def test_training_on_several_files_holds_out_each_and_records_them(coarse_file, 
     """`train --data A B`: one set, each file's tail in validation, every file recorded;
     files for another peg are refused naming the file and the field."""
     from cfvs_maniskill.data.store import load_sets
-    from cfvs_maniskill.nets.checkpoint import file_sha256, load_weights
-    from cfvs_maniskill.train import TrainArgs
-    from cfvs_maniskill.train import train as train_cfvs
+    from cfvs_maniskill.nets.checkpoint import file_sha256
+    from cfvs_maniskill.policies.cfvs.train import TrainArgs
+    from cfvs_maniskill.policies.cfvs.train import train as train_cfvs
+    from cfvs_maniskill.policies.networks import load_weights
 
     other = tmp_path / "other.h5"
     shutil.copy(coarse_file, other)
@@ -352,9 +353,9 @@ def test_training_on_several_files_holds_out_each_and_records_them(coarse_file, 
 def test_training_from_init_weights_starts_where_they_end(coarse_file, tmp_path, capsys):
     """`train --init W`: the run starts from W's weights (zero epochs of change at lr 0 leave
     them as they were), is recorded, and a file of another net kind exits 2 naming it."""
-    from cfvs_maniskill.nets.checkpoint import load_weights
-    from cfvs_maniskill.train import TrainArgs, main
-    from cfvs_maniskill.train import train as train_cfvs
+    from cfvs_maniskill.policies.cfvs.train import TrainArgs, main
+    from cfvs_maniskill.policies.cfvs.train import train as train_cfvs
+    from cfvs_maniskill.policies.networks import load_weights
 
     first = tmp_path / "first.pt"
     train_cfvs(TrainArgs(net="oakn", data=(coarse_file,), out=first, epochs=1, batch=4, points=128))
@@ -386,9 +387,10 @@ def test_kovis_training_from_init_takes_encoder_and_the_fitting_converter(kovis_
     """`train_kovis --init W`: at lr 0 the run ends in W's weights (recorded with its hash);
     a converter for another --dof is left fresh while encoder and decoder are taken; an
     encoder of another growth is refused naming the field."""
-    from cfvs_maniskill.nets.checkpoint import WeightsError, file_sha256, load_weights
-    from cfvs_maniskill.train_kovis import TrainKOVISArgs
-    from cfvs_maniskill.train_kovis import train as train_kovis
+    from cfvs_maniskill.nets.checkpoint import WeightsError, file_sha256
+    from cfvs_maniskill.policies.kovis.train import TrainKOVISArgs
+    from cfvs_maniskill.policies.kovis.train import train as train_kovis
+    from cfvs_maniskill.policies.networks import load_weights
 
     def args(out, **kw):
         base = dict(data=(kovis_file,), out=out, epochs=1, batch=8, growth=(4, 4, 16), dof=4)

@@ -9,10 +9,10 @@ import pytest
 import torch
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.oracle import OracleAgent
 from cfvs_maniskill.constants import hole_half_extent
 from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.policies.oracle.agent import OracleAgent
 from cfvs_maniskill.rendering import device
 
 TASKS = ["PegInsert3DoF-v1", "PegInsert4DoF-v1", "PegInsert6DoF-v1"]

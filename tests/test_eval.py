@@ -552,8 +552,8 @@ def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys, monkey
     """KOVIS given weights for the round peg only: its square-peg tasks are skipped with a
     line naming the missing file; asked for square-peg tasks alone, eval exits 2."""
     from cfvs_maniskill import TASKS
-    from cfvs_maniskill.agents import kovis as K
     from cfvs_maniskill.eval.__main__ import unbuildable
+    from cfvs_maniskill.policies.kovis import agent as K
 
     shutil.copy(K.WEIGHTS_DIR / "round.pt", tmp_path / "round.pt")
     build = K.KOVISAgent.__init__

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cfvs_maniskill.agents.registry import make_agent
 from cfvs_maniskill.control.executor import Executor, ExecutorConfig
 from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.policies.registry import make_agent
 from cfvs_maniskill.rendering.film import CAPTION_PX, Film, project
 from cfvs_maniskill.rendering.views import CLOSEUP_PX, look_at
 

@@ -54,7 +54,7 @@ def _load(kind: str, path: Path):
         from cfvs_maniskill.objects.spec import load_spec
 
         return load_spec(path)
-    from cfvs_maniskill.agents.cfvs import weights_for
+    from cfvs_maniskill.policies.cfvs.agent import weights_for
 
     return weights_for("PegInsert3DoF", "square", path.parent)
 
@@ -72,7 +72,7 @@ def test_hostile_yaml_is_a_named_error_for_every_file_kind(kind, case, tmp_path)
 
 
 def test_a_weights_table_missing_a_net_names_the_field(tmp_path):
-    from cfvs_maniskill.agents.cfvs import weights_for
+    from cfvs_maniskill.policies.cfvs.agent import weights_for
 
     (tmp_path / "tasks.yaml").write_text("PegInsert3DoF: {oakn: square/oakn.pt}\n")
     with pytest.raises(FileFieldError, match=r"tasks.yaml: field 'PegInsert3DoF.opn'"):
@@ -80,8 +80,9 @@ def test_a_weights_table_missing_a_net_names_the_field(tmp_path):
 
 
 def test_weights_holding_nan_are_refused_naming_the_parameter(tmp_path):
-    from cfvs_maniskill.agents.kovis import WEIGHTS_DIR
-    from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
+    from cfvs_maniskill.nets.checkpoint import WeightsError
+    from cfvs_maniskill.policies.kovis.agent import WEIGHTS_DIR
+    from cfvs_maniskill.policies.networks import load_weights
 
     blob = torch.load(WEIGHTS_DIR / "square.pt", weights_only=True)
     name = next(iter(blob["state_dict"]))

@@ -1,5 +1,5 @@
-"""The package layout keeps its promises: the data pipeline and the agents share what
-reads the camera through `perception/`, and neither imports the other."""
+"""The package layout keeps its promises: the layers of docs/architecture.md, in the source
+and at run time, and policies that share what reads the camera through `perception/`."""
 
 from __future__ import annotations
 
@@ -14,32 +14,42 @@ import pytest
 PKG = Path(__file__).resolve().parent.parent / "cfvs_maniskill"
 
 
+def _module_imports(f: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(f.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+        elif isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+    return names
+
+
 def _imports(folder: str) -> dict[str, set[str]]:
-    out = {}
-    for f in sorted((PKG / folder).glob("*.py")):
-        names = set()
-        for node in ast.walk(ast.parse(f.read_text())):
-            if isinstance(node, ast.ImportFrom) and node.module:
-                names.add(node.module)
-            elif isinstance(node, ast.Import):
-                names.update(a.name for a in node.names)
-        out[f.name] = names
-    return out
+    return {f.name: _module_imports(f) for f in sorted((PKG / folder).glob("*.py"))}
 
 
-def test_data_agents_and_control_do_not_import_each_other():
-    """Agents decide, the controller carries decisions out, data is made as agents see:
-    none of the three reaches into another."""
-    pairs = [("data", "agents"), ("agents", "data"), ("agents", "control"), ("control", "agents")]
-    for folder, other in pairs:
-        bad = {
-            f: sorted(n for n in names if n.startswith(f"cfvs_maniskill.{other}"))
-            for f, names in _imports(folder).items()
-        }
-        assert not any(bad.values()), f"{folder}/ imports {other}/: {bad}"
+POLICY_TOOLS = ("collect", "train", "diagnose")
+"""A policy folder's modules that make its data and weights, not its decisions."""
+
+
+def test_policies_data_and_control_do_not_import_each_other():
+    """Policies decide, the controller carries decisions out, data is made as policies see:
+    a policy's deciding code reaches into neither, the controller into no policy, and a
+    policy's data and training reach the data pipeline only."""
+    deciding = {
+        f"{f.parent.name}/{f.name}": names
+        for f in sorted((PKG / "policies").rglob("*.py"))
+        if f.stem not in POLICY_TOOLS
+        for names in [_module_imports(f)]
+    }
+    for where, names in deciding.items():
+        bad = [n for n in names if n.startswith(("cfvs_maniskill.data", "cfvs_maniskill.control"))]
+        assert not bad, f"policies/{where} imports {bad}"
+    for f, names in _imports("control").items():
+        assert not any(n.startswith("cfvs_maniskill.policies") for n in names), f
     for f, names in _imports("perception").items():
         assert not any(
-            n.startswith(("cfvs_maniskill.data", "cfvs_maniskill.agents")) for n in names
+            n.startswith(("cfvs_maniskill.data", "cfvs_maniskill.policies")) for n in names
         ), f
 
 
@@ -49,9 +59,9 @@ LAYERS = {
     "robots": 1, "objects": 1, "sensing": 1,
     "envs": 2, "": 2,
     "perception": 3, "nets": 3,
-    "agents": 4, "control": 4,
-    "episode": 5, "session": 5, "run": 5, "eval": 5, "report": 5, "data": 5, "train": 5, "train_kovis": 5,
-    "assets": 5, "tool": 5, "diagnose_kovis": 5, "cli": 5, "stats": 5, "rendering.film": 5,
+    "policies": 4, "control": 4,
+    "episode": 5, "session": 5, "run": 5, "eval": 5, "report": 5, "data": 5,
+    "assets": 5, "tool": 5, "cli": 5, "stats": 5, "rendering.film": 5,
 }  # fmt: skip
 """docs/architecture.md's layers: a module (or its package) -> its layer; "" is the
 package root (it registers the envs)."""
@@ -59,6 +69,8 @@ package root (it registers the envs)."""
 
 def _layer(module: str) -> int:
     name = module.removeprefix("cfvs_maniskill").removeprefix(".")
+    if name.startswith("policies.") and name.rsplit(".", 1)[-1] in POLICY_TOOLS:
+        return 5  # a policy's data collection, training and diagnosis are tools
     while name not in LAYERS:
         assert "." in name, f"cfvs_maniskill.{name} has no layer in LAYERS"
         name = name.rsplit(".", 1)[0]

@@ -19,10 +19,10 @@ import h5py
 import numpy as np
 import pytest
 
-from cfvs_maniskill.agents.base import Action, Agent
-from cfvs_maniskill.agents.oracle import OracleAgent
 from cfvs_maniskill.control.executor import Executor
 from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.policies.base import Action, Agent
+from cfvs_maniskill.policies.oracle.agent import OracleAgent
 
 from .conftest import ROOT, run_cli
 

@@ -96,9 +96,9 @@ def test_cfvs_finds_the_episodes_depth_scale_and_mount_tilt_from_its_first_view(
     episode's true errors (read from the simulator here, never by the agent): the depth scale
     within 0.7% (the mount's 1.5 mm translation along the table's normal is taken as scale)
     and the mount's tilt about the horizontal axes within 0.25 deg, in every one of 4 scenes."""
-    from cfvs_maniskill.agents.base import Observation
-    from cfvs_maniskill.agents.cfvs import CFVSAgent
-    from cfvs_maniskill.agents.interface import TaskSpec, robot_view
+    from cfvs_maniskill.policies.base import Observation
+    from cfvs_maniskill.policies.cfvs.agent import CFVSAgent
+    from cfvs_maniskill.policies.interface import TaskSpec, robot_view
     from cfvs_maniskill.sensing.model import SAPIEN_CAM_TO_GL
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud", sensor="realistic")

@@ -10,8 +10,6 @@ from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill import resources
-from cfvs_maniskill.agents.oracle import OracleAgent
-from cfvs_maniskill.agents.registry import make_agent
 from cfvs_maniskill.constants import PEG_LENGTH, PRE_INSERT_HEIGHT, SQUARE_PEG_SIDE
 from cfvs_maniskill.control.executor import Executor, ExecutorConfig
 from cfvs_maniskill.control.force_insert import (
@@ -25,6 +23,8 @@ from cfvs_maniskill.control.force_insert import (
 from cfvs_maniskill.control.spiral import SpiralSearch, stalled
 from cfvs_maniskill.envs.task_config import TaskConfigError, load_task
 from cfvs_maniskill.episode import run_episode
+from cfvs_maniskill.policies.oracle.agent import OracleAgent
+from cfvs_maniskill.policies.registry import make_agent
 from cfvs_maniskill.robots.ur5 import chamfered_peg_mesh
 
 TIGHT = "PegInsert6DoF-0.5mm-v1"

@@ -112,7 +112,7 @@ def test_user_folder_adds_tasks_sensors_holes_and_weights(tmp_path):
                     home / "agents" / "cfvs" / "mine" / "round")  # fmt: skip
     probe = """
 import json, cfvs_maniskill, gymnasium as gym
-from cfvs_maniskill.agents.registry import resolve_agent
+from cfvs_maniskill.policies.registry import resolve_agent
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.sensing.profile import available_profiles
 resolve_agent("cfvs@mine")

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.interface import camera_in_tcp, insertion_pose
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.perception.view import (
     BLOCKED,
@@ -15,6 +14,7 @@ from cfvs_maniskill.perception.view import (
     clear_view_yaw,
     sight_blockage,
 )
+from cfvs_maniskill.policies.interface import camera_in_tcp, insertion_pose
 
 from .conftest import held_out_outcomes
 

@@ -64,7 +64,7 @@ class PegInsertEnv(BaseEnv):
     depth back-projected into the **world frame**, metres, with w = 0 for pixels that saw
     nothing (the far plane), as the sensor profile reports it. `wrist_wrench()` is the
     wrist force/torque sensor. Agents see only a `robot_view` of all this
-    (agents/interface.py); the true hole pose in `state` is for the oracle and for training.
+    (policies/interface.py); the true hole pose in `state` is for the oracle and for training.
     """
 
     task: TaskConfig | None = None  # set on each registered subclass, or by task_file=

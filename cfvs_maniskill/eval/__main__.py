@@ -76,8 +76,8 @@ def find_tasks(tasks: tuple[str, ...]) -> dict:
 def resolve(args: EvalArgs, tasks: dict | None = None) -> dict[str, list[str]]:
     """Task -> object names; unknown task / agent / object -> exit 2 with the valid names.
     `tasks`: find_tasks(args.tasks), when the caller has it already."""
-    from cfvs_maniskill.agents.registry import resolve_agent
     from cfvs_maniskill.objects.library import SelectionError, load_library
+    from cfvs_maniskill.policies.registry import resolve_agent
 
     for a in args.agents:
         try:
@@ -126,9 +126,9 @@ def unbuildable(
     weights for its peg): each skipped with one line saying why; an agent that can run
     none of the tasks -> exit 2. `tasks`: name -> TaskConfig. `weights`, when given, gets
     the weights files each (task, agent) loads (settings.Settings.weights)."""
-    from cfvs_maniskill.agents.interface import TaskSpec
-    from cfvs_maniskill.agents.registry import PRIVILEGED, resolve_agent
     from cfvs_maniskill.nets.checkpoint import WeightsError
+    from cfvs_maniskill.policies.interface import TaskSpec
+    from cfvs_maniskill.policies.registry import PRIVILEGED, resolve_agent
     from cfvs_maniskill.provenance import track_weights
 
     skip: set[tuple[str, str]] = set()

@@ -44,7 +44,7 @@ class Worker:
     def _env(self, task: str, agent: str, sensor: str):
         """One env per (task, the agent's env options, sensor): agents that see the same
         observations share it."""
-        from cfvs_maniskill.agents.registry import agent_env_kwargs
+        from cfvs_maniskill.policies.registry import agent_env_kwargs
         from cfvs_maniskill.session import make_env
 
         key = (task, tuple(sorted(agent_env_kwargs(agent).items())), sensor)

@@ -1,1 +1,1 @@
-"""The CFVS networks: a pure-torch PointNet++ backbone, OAKN (coarse) and OPN (fine)."""
+"""What the policies' networks share: a pure-torch PointNet++ backbone and the weights files' format."""

@@ -1,6 +1,6 @@
 """Weights files: one torch file per network with everything needed to trust it.
 
-A weights file holds the state dict plus: which network (oakn | opn | opnv | kovis), its architecture
+A weights file holds the state dict plus: which network (policies/networks.py), its architecture
 config, the task and peg profile of its training data, the data file's sha256, the
 training arguments, the validation metrics and the wall time. Loading checks all of it
 and says exactly what is wrong with a file that does not fit.
@@ -19,22 +19,11 @@ from typing import Any
 import torch
 
 from cfvs_maniskill.errors import FileFieldError
-from cfvs_maniskill.nets.kovis import KOVIS, KOVISConfig
-from cfvs_maniskill.nets.oakn import OAKN, OAKNConfig
-from cfvs_maniskill.nets.opn import OPN, OPNConfig
 from cfvs_maniskill.provenance import (
     file_sha256 as file_sha256,  # re-exported: callers hash data files
 )
 from cfvs_maniskill.provenance import note_loaded
 
-NETS = {
-    "oakn": (OAKN, OAKNConfig),
-    "opn": (OPN, OPNConfig),
-    "opnv": (OAKN, OAKNConfig),
-    "kovis": (KOVIS, KOVISConfig),
-}
-"""opnv: the fine stage as dense keypoint voting (OAKN's architecture on the fine crop);
-see `train.py` for why it replaced the global-regression OPN in the shipped agent."""
 WEIGHTS_FORMAT = "cfvs_maniskill.weights/1"
 
 
@@ -60,13 +49,6 @@ def safe_load(path: Path, error: type[Exception]) -> Any:
         ) from e
     except Exception as e:  # truncated / not a torch file: torch raises many types
         raise error(f"{path}: not a readable weights file ({type(e).__name__}: {e})") from e
-
-
-def build(net: str, config: dict[str, Any]):
-    cls, cfg_cls = NETS[net]
-    known = {f.name for f in dataclasses.fields(cfg_cls)}
-    kw = {k: tuple(v) if isinstance(v, list) else v for k, v in config.items() if k in known}
-    return cls(cfg_cls(**kw))
 
 
 def save_atomic(obj: dict, path: Path) -> None:
@@ -96,9 +78,10 @@ def write_weights(out: Path, model, meta: dict, module: str, args, history: list
     return meta
 
 
-def load_weights(path: Path | str, net: str | tuple[str, ...], peg: str | None = None):
-    """(model in eval mode, metadata) from a weights file, checked against what we need
-    (`net`: the network kind, or a tuple of acceptable kinds)."""
+def read_weights(path: Path | str, net: str | tuple[str, ...], peg: str | None = None) -> dict:
+    """A weights file's contents, checked against what we need (`net`: the network kind, or
+    a tuple of acceptable kinds; `peg`: the peg it must be trained for) and with finite
+    parameters; the policy's `load_weights` builds the network from it."""
     kinds = (net,) if isinstance(net, str) else tuple(net)
     net = " or ".join(kinds)
     path = Path(path)
@@ -126,10 +109,4 @@ def load_weights(path: Path | str, net: str | tuple[str, ...], peg: str | None =
             f"{path}: parameter '{broken[0]}' holds NaN or infinity ({len(broken)} tensors): "
             "the training that wrote it diverged; retrain or restore the file"
         )
-    model = build(blob["net"], blob["config"])
-    try:
-        model.load_state_dict(blob["state_dict"])
-    except RuntimeError as e:
-        raise WeightsError(f"{path}: weights do not fit the {net} architecture: {e}") from e
-    model.eval()
-    return model, blob
+    return blob

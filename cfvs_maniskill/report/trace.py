@@ -132,8 +132,8 @@ def _today(file: str) -> str | None:
 def agent_weights_today(agent: str, task: str) -> dict[str, str] | None:
     """{file: sha256} the agent loads today for the task, None: it cannot be built."""
     from cfvs_maniskill import TASKS
-    from cfvs_maniskill.agents.interface import TaskSpec
-    from cfvs_maniskill.agents.registry import PRIVILEGED, resolve_agent
+    from cfvs_maniskill.policies.interface import TaskSpec
+    from cfvs_maniskill.policies.registry import PRIVILEGED, resolve_agent
     from cfvs_maniskill.provenance import track_weights
 
     if agent in PRIVILEGED:

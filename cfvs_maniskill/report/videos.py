@@ -64,8 +64,8 @@ def render(
     from tqdm import tqdm
 
     import cfvs_maniskill  # noqa: F401  (render device, task registration)
-    from cfvs_maniskill.agents.registry import agent_env_kwargs
     from cfvs_maniskill.envs.lookup import sensor_of_record, task_of_record
+    from cfvs_maniskill.policies.registry import agent_env_kwargs
     from cfvs_maniskill.rendering.film import Film
     from cfvs_maniskill.session import make_env, open_session
 

@@ -23,12 +23,13 @@ import numpy as np
 import torch
 
 from cfvs_maniskill import resources
-from cfvs_maniskill.agents.base import Action, Agent, Observation
-from cfvs_maniskill.agents.interface import TaskSpec
-from cfvs_maniskill.nets.checkpoint import WeightsError, load_weights
-from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
+from cfvs_maniskill.nets.checkpoint import WeightsError
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.images import normalise, stereo_images
+from cfvs_maniskill.policies.base import Action, Agent, Observation
+from cfvs_maniskill.policies.interface import TaskSpec
+from cfvs_maniskill.policies.kovis.model import MOTION_DIMS, implied_distance
+from cfvs_maniskill.policies.networks import load_weights
 from cfvs_maniskill.task_dof import constrain
 
 WEIGHTS_DIR = resources.bundled("agents") / "kovis"

@@ -1,4 +1,4 @@
-"""Train OAKN or the fine network on CPU: `python -m cfvs_maniskill.train --net oakn|opnv|opn --data FILE...`.
+"""Train OAKN or the fine network on CPU: `python -m cfvs_maniskill.policies.cfvs.train --net oakn|opnv|opn --data FILE...`.
 
 Resumable: the full training state is saved after every epoch to OUT.resume; a restarted
 run with the same arguments continues from the last finished epoch. At the end OUT holds
@@ -24,17 +24,16 @@ from cfvs_maniskill.data.augment import AugmentConfig, augment
 from cfvs_maniskill.data.store import DatasetError, load_sets
 from cfvs_maniskill.nets.checkpoint import (
     WeightsError,
-    build,
     file_sha256,
-    load_weights,
     safe_load,
     save_atomic,
     write_weights,
 )
-from cfvs_maniskill.nets.oakn import OAKNConfig, oakn_loss, weighted_keypoints
-from cfvs_maniskill.nets.opn import OPNConfig, opn_loss
 from cfvs_maniskill.nets.pointnet2 import seed_sampling
 from cfvs_maniskill.perception import labels as L
+from cfvs_maniskill.policies.cfvs.oakn import OAKNConfig, oakn_loss, weighted_keypoints
+from cfvs_maniskill.policies.cfvs.opn import OPNConfig, opn_loss
+from cfvs_maniskill.policies.networks import build, load_weights
 
 
 @dataclass
@@ -293,7 +292,13 @@ def train(args: TrainArgs) -> dict:
         else {"path": str(args.init), "sha256": file_sha256(args.init)},
     }
     write_weights(
-        args.out, model, meta, "cfvs_maniskill.train", args, state["history"], state["wall_s"]
+        args.out,
+        model,
+        meta,
+        "cfvs_maniskill.policies.cfvs.train",
+        args,
+        state["history"],
+        state["wall_s"],
     )
     resume_path.unlink(missing_ok=True)
     return state

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import abc
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -123,3 +124,15 @@ def checked_action(action, agent: str, decision: int):
         if not np.all(np.isfinite(pose)):
             raise AgentFailure(agent, decision, "MalformedAction", "returned a non-finite pose")
     return action
+
+
+@dataclass(frozen=True)
+class AgentEntry:
+    """An agent name's class and factory, as a policy folder declares it (its `AGENTS`)."""
+
+    cls: str
+    """`module:Class`: its `obs_mode` and `env_options` say what the env must give it."""
+    make: Callable[..., Agent]
+    """Builds the agent from the task's TaskSpec (from the env if `privileged`)."""
+    privileged: bool = False
+    """Takes the env itself and reads the truth (the oracle): a ceiling, not an agent."""

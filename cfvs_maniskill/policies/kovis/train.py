@@ -1,4 +1,4 @@
-"""Train the KOVIS baseline on CPU: `python -m cfvs_maniskill.train_kovis --data FILE ...`.
+"""Train the KOVIS baseline on CPU: `python -m cfvs_maniskill.policies.kovis.train --data FILE ...`.
 
 Data: `python -m cfvs_maniskill.data collect --kind kovis` files (rollouts of stereo pairs;
 several files of one peg may be mixed). As KOVIS's train_servo.py: encoder, decoder and
@@ -31,19 +31,19 @@ from cfvs_maniskill.data.store import DatasetError, load_sets
 from cfvs_maniskill.nets.checkpoint import (
     WeightsError,
     file_sha256,
-    load_weights,
     save_atomic,
     write_weights,
 )
-from cfvs_maniskill.nets.kovis import (
+from cfvs_maniskill.perception.images import DEPTH_RANGE, depth_normalise, normalise
+from cfvs_maniskill.policies.cfvs.train import cli_main, resume_state
+from cfvs_maniskill.policies.kovis.model import (
     KOVIS,
     KOVISConfig,
     implied_distance,
     kovis_loss,
     motion_targets,
 )
-from cfvs_maniskill.perception.images import DEPTH_RANGE, depth_normalise, normalise
-from cfvs_maniskill.train import cli_main, resume_state
+from cfvs_maniskill.policies.networks import load_weights
 
 FIELDS = ("images", "depth", "seg", "twist", "valid")
 
@@ -327,7 +327,7 @@ def train(args: TrainKOVISArgs) -> dict:
     }
     wall = time.perf_counter() - t_start
     meta = write_weights(
-        args.out, model, meta, "cfvs_maniskill.train_kovis", args, state["history"], wall
+        args.out, model, meta, "cfvs_maniskill.policies.kovis.train", args, state["history"], wall
     )
     resume_path.unlink(missing_ok=True)
     return meta

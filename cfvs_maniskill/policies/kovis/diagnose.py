@@ -1,5 +1,5 @@
 """Where KOVIS's servo loses precision, measured in closed loop:
-`python -m cfvs_maniskill.diagnose_kovis --task PegInsert3DoF --episodes 20`.
+`python -m cfvs_maniskill.policies.kovis.diagnose --task PegInsert3DoF --episodes 20`.
 
 Runs the shipped KOVIS on the unseen test objects and, at every decision, compares what
 the network says with the truth the simulator knows (read here for the diagnosis only; the
@@ -45,13 +45,13 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
 def diagnose(args: DiagnoseArgs) -> dict:
     import torch
 
-    from cfvs_maniskill.agents.interface import TaskSpec
-    from cfvs_maniskill.agents.kovis import KOVISAgent
     from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
     from cfvs_maniskill.control.executor import Executor
     from cfvs_maniskill.nets.checkpoint import file_sha256
-    from cfvs_maniskill.nets.kovis import MOTION_DIMS, implied_distance
     from cfvs_maniskill.perception import labels as L
+    from cfvs_maniskill.policies.interface import TaskSpec
+    from cfvs_maniskill.policies.kovis.agent import KOVISAgent
+    from cfvs_maniskill.policies.kovis.model import MOTION_DIMS, implied_distance
     from cfvs_maniskill.provenance import file_key
     from cfvs_maniskill.session import Session, make_env
     from cfvs_maniskill.task_dof import constrain
@@ -135,7 +135,7 @@ def diagnose(args: DiagnoseArgs) -> dict:
         "bins": bins,
         "stop_distance_mm_median": float(np.median(stops)) if stops else None,
         "stop_distance_mm_p90": float(np.percentile(stops, 90)) if stops else None,
-        "command": "python -m cfvs_maniskill.diagnose_kovis " + " ".join(sys.argv[1:]),
+        "command": "python -m cfvs_maniskill.policies.kovis.diagnose " + " ".join(sys.argv[1:]),
     }
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "diagnosis.json").write_text(json.dumps(out, indent=1))

@@ -20,12 +20,12 @@ import open3d as o3d
 import trimesh
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.base import Action, Agent, Observation
-from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.objects.build import build_geometry
 from cfvs_maniskill.objects.library import load_library
 from cfvs_maniskill.perception.clouds import MIN_OBJECT_POINTS, object_points, tool_to_world
+from cfvs_maniskill.policies.base import Action, Agent, Observation
+from cfvs_maniskill.policies.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.task_dof import constrain
 
 
@@ -79,7 +79,7 @@ class ICPAgent(Agent):
         self.model_hole = G.make(np.eye(3), self.geom.hole_frame)
         self.oakn = None
         if self.cfg.init == "oakn":
-            from cfvs_maniskill.agents.cfvs import CFVSAgent
+            from cfvs_maniskill.policies.cfvs.agent import CFVSAgent
 
             self.oakn = CFVSAgent(task)  # only its coarse stage (OAKN + Algorithm 1) is used
         self.moved = False

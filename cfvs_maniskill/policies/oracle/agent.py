@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from cfvs_maniskill.agents.base import Action, Agent, Observation
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+from cfvs_maniskill.policies.base import Action, Agent, Observation
 
 
 class OracleAgent(Agent):

@@ -24,8 +24,6 @@ import open3d as o3d
 from scipy import ndimage
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.agents.base import Action, Agent, Observation
-from cfvs_maniskill.agents.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, hole_half_extent
 from cfvs_maniskill.perception.clouds import (
     MIN_OBJECT_POINTS,
@@ -33,6 +31,8 @@ from cfvs_maniskill.perception.clouds import (
     object_points,
     tool_to_world,
 )
+from cfvs_maniskill.policies.base import Action, Agent, Observation
+from cfvs_maniskill.policies.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.task_dof import constrain
 
 

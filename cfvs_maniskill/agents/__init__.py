@@ -1,2 +1,0 @@
-"""Policies ("agents" in this project; the robot is in `robots/`, the controller that carries
-out their decisions in `control/`)."""

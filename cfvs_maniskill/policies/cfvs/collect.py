@@ -1,0 +1,100 @@
+"""CFVS's datasets (paper: Data generation), drawn by `python -m cfvs_maniskill.data collect`.
+
+* coarse: the peg at the task's initial configuration, 15-30 cm (the task's init_error
+  range) from a randomly placed hole object; the cloud, keypoints, offsets, confidence.
+* fine: the peg at the true pre-insertion pose moved by a random tool-frame offset
+  (-dt, -dtheta, ranges from the task file); the cropped cloud and the action (dt, dtheta)
+  that undoes it. The robot is set to the perturbed pose directly (no motion is needed to
+  render what the camera would see there).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from cfvs_maniskill import geometry as G
+from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+from cfvs_maniskill.perception import labels as L
+from cfvs_maniskill.perception.clouds import (
+    MIN_OBJECT_POINTS,
+    fine_crop,
+    object_points,
+    sample_fixed,
+    world_to_tool,
+)
+from cfvs_maniskill.policies.dataset import SampleKind
+
+
+def fine_start(u, H: np.ndarray, rng, max_translation: float, constrain=None, tries: int = 50):
+    """Joints putting the tool at a random fine-stage error from the true pre-insertion pose
+    (the paper's "-dt, -dtheta"; tilt and yaw within the task's limits, `constrain(T, T0)`
+    keeps the task's DoF): the first of `tries` draws the arm reaches with the tip still
+    out of the object; None if none is."""
+    task = u.task
+    q_seed = u.agent.robot.get_qpos()[0].numpy()
+    T0 = u.insertion_pose(-PRE_INSERT_HEIGHT, H)
+    for _ in range(tries):
+        offset = L.random_offset(
+            rng, max_translation, task.fine_max_tilt_deg, task.fine_max_yaw_deg
+        )
+        Tp = T0 @ G.inv(offset)
+        if constrain is not None:
+            Tp = constrain(Tp, T0)
+        if (G.inv(H) @ Tp)[2, 3] < 0.005:
+            continue  # the tip would be inside the object: not a pose the servo visits
+        q, ok = u.ik(Tp, q_seed)
+        if ok:
+            return q
+    return None
+
+
+def _common(u, points, tcp, H, i):
+    return {
+        "points": points.astype(np.float32),
+        "tcp_pose": tcp,
+        "hole_pose": H,
+        "object": np.array(u.episode_info["object"]),
+        "sample_index": np.array(i, dtype=np.int64),
+    }
+
+
+def _coarse(args, task, u, obs, H, rng, i):
+    tcp = u.tcp_matrix()
+    pts = object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, task.peg)
+    if len(pts) < MIN_OBJECT_POINTS:
+        return None  # the camera hardly sees the object: redraw
+    pts = sample_fixed(pts, args.points, rng)
+    k = world_to_tool(L.keypoints_world(H, tcp, task.peg), tcp)
+    row = _common(u, pts, tcp, H, i)
+    row.update(
+        keypoints=k.astype(np.float32),
+        offsets=L.offsets(pts, k),
+        confidence=L.confidence(pts, k[0]),
+        init_error=np.array(np.linalg.norm(tcp[:3, 3] - H[:3, 3]), dtype=np.float32),
+    )
+    return row
+
+
+def _fine(args, task, u, obs, H, rng, i):
+    q = fine_start(u, H, rng, task.fine_max_translation)
+    if q is None:
+        return None
+    u.agent.reset(torch.as_tensor(q, dtype=torch.float32)[None])
+    obs = u.get_obs()
+    tcp = u.tcp_matrix()  # what the robot really reached (IK is exact to < 1 mm)
+    target = u.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp)
+    pts = fine_crop(object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, task.peg))
+    if len(pts) < MIN_OBJECT_POINTS:
+        return None  # the crop sees (almost) nothing: not a useful sample
+    pts = sample_fixed(pts, args.points, rng)
+    row = _common(u, pts, tcp, H, i)
+    row.update(action=L.fine_action(tcp, target), target_pose=target)
+    return row
+
+
+KINDS = {
+    "coarse": SampleKind({"obs_mode": "pointcloud"}, False, _coarse),
+    "fine": SampleKind({"obs_mode": "pointcloud"}, True, _fine),
+}
+"""OAKN's (keypoints + confidence) and OPN's (actions) samples."""

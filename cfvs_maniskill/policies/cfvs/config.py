@@ -1,0 +1,153 @@
+"""CFVS's configuration: the paper's stages and the components that refine them, each a
+switch; REQUIRES says which switch refines which, ABLATIONS names the agent that changes
+one (`cfvs_<name>`). Light: listing the agents needs no network or simulator."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from cfvs_maniskill import resources
+
+WEIGHTS_DIR = resources.bundled("agents") / "cfvs"
+
+
+@dataclass
+class CFVSConfig:
+    coarse_to_fine: bool = True
+    """Run the fine OPN loop after the coarse move (ablation: False)."""
+    confidence_map: bool = True
+    """Weight keypoint candidates by OAKN's confidence (ablation: uniform mean)."""
+    augmentation: bool | None = None
+    """None: the shipped weights (the square nets are trained without the paper's
+    scaling-and-bending augmentation). True / False: the files trained with / without it."""
+    max_fine_iterations: int = 8
+    """Algorithm 2's repeat limit."""
+    tol_translation: float = 0.001
+    """e_t: stop servoing when the predicted |dt| is below this, metres (the paper gives
+    no value; docs/cfvs.md has how 1 mm was chosen)."""
+    tol_rotation_deg: float = 1.5
+    """e_r: ... and the predicted |dr| below this, degrees."""
+    fine_votes: int = 3
+    """OPN predictions (on independent random point subsets) averaged per fine step."""
+    vote_gate: float = 0.003
+    """A fine step first runs one vote; when it asks for a move longer than this (metres),
+    the peg moves on it alone: far from the pose one vote's error (~1 mm) is small against
+    the move and the next step corrects it. Nearer, the other `fine_votes - 1` run too and
+    all are averaged, so the step that decides to stop sees the full average. 0: every
+    step averages all votes."""
+    final_correction: bool = True
+    """When the offset is below (e_t, e_r), move by it once more, then insert (no new
+    observation: it is the move Algorithm 2's next iteration would start with). False: the
+    paper's Algorithm 2, which inserts from where the last check was made, leaving up to
+    e_t of the offset it measured."""
+    rim_plane: bool = True
+    """Refine OPN's estimate by the geometry of the face round the opening it points at
+    (`refine`): in 6-DoF the hole's axis becomes the face's normal (perception/rim.py; 3-
+    and 4-DoF holes are upright); OPN still gives where the hole is. False: the paper's
+    fine stage (the `cfvs_no_rim` ablation)."""
+    rim_parallel_planes: bool = True
+    """6-DoF: check the face's least-median plane against a fit of the ring's parallel planar
+    patches (perception/rim.py) and take the latter where they disagree: beside a rib or a
+    step the face may hold under half the ring. False: the least-median plane alone."""
+    rim_square_ring: bool = True
+    """6-DoF square holes: the ring follows the opening's sides (from OPN's yaw), starting 4
+    mm outside them. False: a round ring beyond the opening's corners, which can fall off a
+    small face (a boss, a hub) onto whatever is beyond."""
+    rim_narrow_ring: bool = True
+    """6-DoF: the rim fit tries a 10 mm ring before the 20 mm one and keeps it when the
+    noise measured on it predicts a normal within 0.1 deg (perception/rim.py): beside a step
+    round the opening (a counterbore) the wide ring reaches the step. False: the 20 mm
+    ring always."""
+    opening_fit: bool = True
+    """With `rim_plane`: move the estimate in the face's plane (and turn a square about its
+    axis) onto the opening the wrist cloud shows, from the face's edge and the walls in
+    view (perception/opening.py; the hole's size is the task's nominal one): a square's
+    sides, a round hole's circle. False: OPN's position and yaw."""
+    face_height: bool = True
+    """With `rim_plane`: put the hole's opening at the level of the face seen just outside
+    it (perception/opening.face_height) instead of OPN's height, which walls and flanges
+    beside the opening pull up. False: OPN's height."""
+    face_guard: bool = True
+    """With `face_height`: when OPN's new estimate has no face round its opening in the
+    cloud (fewer than MIN_LEVEL_POINTS 1-6 mm outside it) after an estimate that had one,
+    the fine loop stops and the peg is inserted from where it is, the pose of the last
+    estimate the face supported: beside a step OPN can jump to another surface and back.
+    False: every estimate is taken."""
+    clear_view: bool = True
+    """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
+    nearest the tool's own whose camera has a clear line of sight to the opening from the
+    pre-insertion pose (perception/view.py; the coarse cloud says what stands over the
+    face). False: always the nearest."""
+    turn_when_blind: bool = True
+    """4- and 6-DoF: when a fine look sees nothing round the peg (a wall between the camera
+    and the opening, or a step nearer than the camera's minimum range fills its view),
+    move to the same pre-insertion pose turned about the hole's axis, which puts the
+    camera on another side of the opening, up to three turns. False: give up there. A 3-DoF
+    peg keeps its yaw, so it gives up either way."""
+    table_calibration: bool = True
+    """Correct the camera's depth scale and two of its mount angles once per episode, from
+    the table plane in the coarse view, whose height the robot knows
+    (perception/table_calibration.py). False: the cloud as the camera reports it."""
+    weights_dir: Path = WEIGHTS_DIR
+
+    def __post_init__(self) -> None:
+        for switch, needs in REQUIRES.items():
+            if getattr(self, switch) and not getattr(self, needs):
+                raise ValueError(
+                    f"CFVSConfig: {switch}=True needs {needs}=True (it refines what "
+                    f"{needs} computes); set {switch}=False too, or build it with "
+                    f"CFVSConfig.without('{needs}')"
+                )
+
+    @classmethod
+    def without(cls, switch: str, **fields) -> CFVSConfig:
+        """The default config with `switch` off, and with it every switch that needs it."""
+        off = {switch}
+        while grown := {s for s, n in REQUIRES.items() if n in off} - off:
+            off |= grown
+        return cls(**{s: False for s in off}, **fields)
+
+
+REQUIRES = {
+    "rim_plane": "coarse_to_fine",
+    "final_correction": "coarse_to_fine",
+    "turn_when_blind": "coarse_to_fine",
+    "opening_fit": "rim_plane",
+    "face_height": "rim_plane",
+    "face_guard": "face_height",
+    "rim_parallel_planes": "rim_plane",
+    "rim_square_ring": "rim_plane",
+    "rim_narrow_ring": "rim_plane",
+}
+"""Switch -> the switch it refines: a config with the first on and the second off is
+refused, since the first would silently do nothing."""
+
+ABLATIONS: dict[str, tuple[str, str]] = {
+    # The paper's Table IV.
+    "no_c2f": ("coarse_to_fine", "insert right after OAKN's coarse move"),
+    "no_map": ("confidence_map", "keypoints as the uniform mean of the candidates"),
+    "aug": ("augmentation", "networks trained with the paper's augmentation"),
+    # The paper's own fine stage, and one per component of ours (docs/cfvs.md).
+    "no_rim": ("rim_plane", "the paper's fine stage: OPN's estimate, no face geometry"),
+    "opn_height": ("face_height", "the opening's height from OPN, not from the face"),
+    "no_face_guard": ("face_guard", "every fine estimate taken, with or without a face"),
+    "no_opening": ("opening_fit", "the opening's centre (a square's yaw) from OPN alone"),
+    "no_parallel": ("rim_parallel_planes", "the face's plane by least median of squares alone"),
+    "wide_ring": ("rim_narrow_ring", "the rim fit on the 20 mm ring always"),
+    "round_ring": ("rim_square_ring", "a round rim ring beyond a square opening's corners"),
+    "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
+    "no_turn": ("turn_when_blind", "give up when a fine look sees nothing round the peg"),
+    "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
+    "no_table_calibration": ("table_calibration", "the cloud as reported, not set by the table"),
+}
+"""`cfvs_<name>`: CFVS with one component changed (the switch, then what it says)."""
+
+
+def ablation_config(name: str) -> CFVSConfig:
+    """The config of ablation `name` (a key of ABLATIONS): its switch flipped from the
+    default, with the switches that need it (REQUIRES) off too."""
+    switch, _ = ABLATIONS[name]
+    if switch == "augmentation":  # the shipped nets are trained without it: turn it on
+        return CFVSConfig(augmentation=True)
+    return CFVSConfig.without(switch)

@@ -86,12 +86,15 @@ CAMERA_FOV = np.deg2rad(70.0)
 
 
 def _ur5_dir() -> Path:
-    import site
+    from importlib import metadata
 
-    for base in map(Path, site.getsitepackages()):
-        d = base / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "ur_description"
-        if d.is_dir():
-            return d
+    try:  # wherever the distribution is installed: a venv, the user site, a path
+        dist = metadata.distribution("example-robot-data")
+        d = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
+        if (d / "ur_description").is_dir():
+            return d / "ur_description"
+    except metadata.PackageNotFoundError:
+        pass
     raise FileNotFoundError(
         "example-robot-data's ur_description not found in site-packages; "
         "run `pip install example-robot-data==6.0.0`"

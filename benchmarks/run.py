@@ -31,7 +31,7 @@ class BenchArgs:
 
 
 def main(args: BenchArgs) -> int:
-    import cfvs_maniskill  # noqa: F401  (render device, tasks)
+    import cfvs_maniskill  # noqa: F401  (registers the env ids)
     from benchmarks import cfvs_speed, env_step, eval_scaling, sensing, servo_time, startup, video
 
     t0 = time.perf_counter()

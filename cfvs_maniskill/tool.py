@@ -31,7 +31,6 @@ def main(argv: list[str]) -> int:
         print("\nshort names: " + ", ".join(f"{k} -> {v}" for k, v in SHORT_NAMES.items()))
         return 0 if argv else 2
     module = SHORT_NAMES.get(argv[0], argv[0])
-    import cfvs_maniskill  # noqa: F401  (registers the envs; picks the render device)
 
     try:
         found = importlib.util.find_spec(module) is not None

@@ -3,13 +3,14 @@ compile (first frame) happens once for the whole suite."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-import cfvs_maniskill  # noqa: F401  (picks the render device, registers envs)
+import cfvs_maniskill  # noqa: F401  (registers the env ids)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -43,6 +44,12 @@ def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout
     )
+
+
+def quiet(stderr: str) -> bool:
+    """Only progress bars: no driver or library warnings on the user's terminal."""
+    lines = [x for x in re.split(r"[\r\n]", stderr) if x.strip()]
+    return not [x for x in lines if re.search(r"warn|error|unsupported", x, re.IGNORECASE)]
 
 
 def held_out_outcomes(

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import ROOT, run_cli
+from .conftest import ROOT, quiet, run_cli
 
 ARGS = [
     "--tasks", "PegInsert3DoF", "--agents", "oracle", "icp",
@@ -315,6 +315,7 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
     out = tmp_path / "report"
     r = run_cli("cfvs_maniskill.report", str(results), "--out", str(out), "--video-variants")
     assert r.returncode == 0, r.stderr[-2000:]
+    assert quiet(r.stderr), r.stderr[-2000:]  # replaying made envs: no driver lines shown
     text = (out / "README.md").read_text()
     shown = text.split("## Videos")[1]
     row = next(x for x in shown.splitlines() if x.startswith("| PegInsert3DoF | cfvs_no_aug |"))

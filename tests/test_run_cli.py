@@ -7,7 +7,7 @@ import re
 
 import imageio_ffmpeg
 
-from .conftest import run_cli
+from .conftest import quiet, run_cli
 
 
 def test_run_writes_json_lines_and_a_summary(tmp_path):
@@ -27,6 +27,7 @@ def test_run_writes_json_lines_and_a_summary(tmp_path):
     )
     assert r.returncode == 0, r.stderr[-2000:]
     assert "success 2/2" in r.stdout and "95% CI" in r.stdout
+    assert quiet(r.stderr), r.stderr[-2000:]  # the renderer's start-up lines go nowhere
     rows = [json.loads(line) for line in out.read_text().splitlines()]
     assert [row["seed"] for row in rows] == [7, 8]
     for row in rows:

@@ -30,7 +30,6 @@ def main(argv: list[str] | None = None) -> int:
         args=argv,
         description="CFVS datasets: `collect` coarse/fine HDF5 files, `show` one sample.",
     )
-    import cfvs_maniskill  # noqa: F401  (render device, task registration)
     from cfvs_maniskill.data.store import DatasetError
     from cfvs_maniskill.envs.lookup import UnknownTaskError
     from cfvs_maniskill.envs.task_config import TaskConfigError

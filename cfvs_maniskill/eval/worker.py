@@ -28,8 +28,6 @@ class Worker:
     def __init__(self, cfg: WorkerConfig):
         import torch
 
-        import cfvs_maniskill  # noqa: F401  (render device, task registration)
-
         # One torch thread in every worker, however many workers: processes scale better
         # than threads here, and the thread count changes float sums (point clouds, nets),
         # so with it fixed an episode's record does not depend on --workers.

@@ -115,7 +115,8 @@ def success_vs_tilt(
         ax.set_xlabel("hole tilt from vertical (deg)")
         ax.set_ylim(0, 1.05)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="lower left")
+        if group:  # a panel with no agent line has no legend (matplotlib warns otherwise)
+            ax.legend(fontsize=7, loc="lower left")
     for ax in list(axes.flat)[len(groups) :]:
         ax.set_visible(False)
     for row in axes:

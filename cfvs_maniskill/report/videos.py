@@ -63,7 +63,6 @@ def render(
     again)."""
     from tqdm import tqdm
 
-    import cfvs_maniskill  # noqa: F401  (render device, task registration)
     from cfvs_maniskill.envs.lookup import sensor_of_record, task_of_record
     from cfvs_maniskill.policies.registry import agent_env_kwargs
     from cfvs_maniskill.rendering.film import Film

@@ -40,6 +40,7 @@ def code_version() -> str:
 
 NOT_EPISODE_CODE = (
     *("report/", "data/", "policies/dataset.py"),
+    *("sensing/floor.py", "sensing/texture_study.py"),  # analyses of the sensor models
     "bundled/",  # links to the user-file folders: hashed file by file in each record
     # Orchestration: which jobs run, where, and how their records are kept; an episode's
     # outcome is decided by the worker, the session and what they call.

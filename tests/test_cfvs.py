@@ -347,8 +347,9 @@ def test_a_switch_without_the_one_it_refines_is_refused(fields, named):
 
 
 def test_registry_lists_the_paper_agents_and_makes_every_ablation():
+    from cfvs_maniskill.policies.cfvs import ablation_names
     from cfvs_maniskill.policies.cfvs.config import ablation_config
-    from cfvs_maniskill.policies.registry import AGENTS, ablation_names, resolve_agent
+    from cfvs_maniskill.policies.registry import AGENTS, resolve_agent
 
     assert len(AGENTS) <= 10
     from cfvs_maniskill import TASKS

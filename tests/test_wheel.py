@@ -17,7 +17,9 @@ import pytest
 
 from .conftest import ROOT, run_cli
 
-pytestmark = pytest.mark.slow
+# One worker builds the wheel once for both tests: two builds of one checkout at once race
+# on its build/ and egg-info folders.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("wheel")]
 
 BLOCK = "split: test\nbody:\n  box: {size: [0.15, 0.13, 0.07]}\ncolor: [0.4, 0.5, 0.6]\n"
 

@@ -17,22 +17,34 @@ import pytest
 
 from .conftest import ROOT, run_cli
 
-# One worker builds the wheel once for both tests: two builds of one checkout at once race
-# on its build/ and egg-info folders.
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("wheel")]
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("wheel")]  # one wheel, one worker
 
 BLOCK = "split: test\nbody:\n  box: {size: [0.15, 0.13, 0.07]}\ncolor: [0.4, 0.5, 0.6]\n"
 
 
+SOURCES = ("pyproject.toml", "README.md", "cfvs_maniskill_setup.py", "cfvs_maniskill", "tasks",
+           "sensors", "assets", "agents")  # fmt: skip
+"""What the wheel is built from: the package and the folders its bundled/ links point to."""
+
+
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
+    # Built from a copy: a build in the checkout writes its build/ and egg-info folders,
+    # which other tests running at the same time may be reading or writing too.
+    src = tmp_path_factory.mktemp("src")
+    skip = shutil.ignore_patterns("__pycache__", "*.egg-info")
+    for name in SOURCES:
+        if (ROOT / name).is_dir():
+            shutil.copytree(ROOT / name, src / name, symlinks=True, ignore=skip)
+        else:
+            shutil.copy2(ROOT / name, src / name)
     dist = tmp_path_factory.mktemp("dist")
-    subprocess.run(
+    r = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-         "-w", str(dist), str(ROOT)],
-        check=True, capture_output=True, timeout=600,
+         "-w", str(dist), str(src)],
+        capture_output=True, text=True, timeout=600,
     )  # fmt: skip
-    shutil.rmtree(ROOT / "build", ignore_errors=True)  # setuptools' scratch folder
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     return next(dist.glob("cfvs_maniskill-*.whl"))
 
 

@@ -5,7 +5,7 @@ Importing the package registers one gym env id per task file in `tasks/`
 and the rendering device (a GPU, else SwiftShader on the CPU: set it up with
 `cfvs-maniskill setup-render`) are chosen when an env is first made. Vocabulary: in
 ManiSkill an "agent" is the robot; here the robot lives in `robots/` and an *agent* is a
-policy (`agents/`).
+policy (`policies/`).
 """
 
 import warnings

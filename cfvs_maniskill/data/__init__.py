@@ -1,1 +1,2 @@
-"""CFVS training data: coarse (OAKN) and fine (OPN) datasets, labels, augmentation, HDF5 files."""
+"""Training data for any policy: the resumable collector of the sample kinds the policies
+declare, procedural bodies, augmentation, HDF5 files."""

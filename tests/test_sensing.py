@@ -353,6 +353,22 @@ def test_hand_eye_floor_is_the_mount_error_seen_at_the_hole():
     assert np.all(s[:, 1] <= 0.5 + 1e-6) and s[:, 0].max() > 0.0015
 
 
+def test_closing_the_loop_on_the_peg_removes_the_calibration_floor():
+    """A camera that sees the peg and the opening and servoes their offset: without noise
+    no mount or camera-calibration error leaves a residual (a linear camera error keeps
+    the tip on the axis); with the profile's noise it stays far below the open-loop floor."""
+    from cfvs_maniskill.sensing.floor import closed_loop_samples, profile_floor_samples
+
+    for name in ("realistic", "handeye_2mm_1deg"):
+        profile = load_profile(name)
+        exact = closed_loop_samples(profile, 300, seed=2, points=10**12)
+        assert np.percentile(exact[:, 0], 90) < 1e-5 and np.percentile(exact[:, 1], 90) < 1e-3
+        open_loop = profile_floor_samples(profile, 300, seed=2)
+        assert np.percentile(open_loop[:, 0], 90) > 1.5e-3
+    noisy = closed_loop_samples(load_profile("realistic"), 2000, seed=2)
+    assert 1e-5 < np.percentile(noisy[:, 0], 90) < 0.5e-3
+
+
 def test_a_remembered_table_fit_is_the_fit_of_that_cloud_and_threshold():
     """fit_table remembers recent fits (the calibration and the planner fit the same raw
     view): a cloud with 1000 table points is too few at min_points=2000 (the nominal

@@ -19,6 +19,15 @@ perceived point is P(p); the servo ends where C P((C M)^-1 H) = D, so H = C M P^
 A robot that calibrates its camera against the table (perception/table_calibration.py)
 applies K = s Q, fitted to the table as P shows it from the coarse view, to what it sees:
 then H = C M P^-1(K^-1 C^-1 D) (`table_calibrations`, `depth_residuals(..., calibration)`).
+
+The closed-loop floor (`closed_loop_samples`) is that of a servo whose camera sees the
+peg's tip and the opening together and drives their offset, as both appear, to the
+pre-insertion one. The mount error M then only changes the viewpoint and the step's
+direction (the servo converges wherever the perceived offset is right), and a camera
+error P that is linear in the camera frame (a depth scale, a focal or principal-point
+error: x' = k s x + c s z / f) keeps points on a line on a line: the tip ends on the true
+axis. What is left is P's part that is not linear (a depth offset) and the noise of the
+measured tip, axis and opening.
 """
 
 from __future__ import annotations
@@ -180,6 +189,90 @@ def profile_floor_samples(
     return depth_residuals(mounts, depth, focal_px, K)
 
 
+PEG_VIEW_OFFSET = (0.075, 0.0, 0.02)
+"""A mount that sees the peg: the camera 75 mm off the tool axis, 20 mm below the flange
+(tool0 frame, m), as a bracket beside a UR flange holds a D405 (42 x 42 x 23 mm)."""
+PEG_VIEW_AIM = (0.0, 0.0, 0.13)
+"""... aimed at the tool axis 30 mm past the tip (the peg is 100 mm long): the opening at
+the pre-insertion pose, the tip 0.11 m and the opening 0.13 m away, beyond the D405's 7 cm
+minimum range, both near the image's centre."""
+PLAIN_PART_NOISE = 2.5
+"""Stereo noise on a plain part against a textured target (the profiles' sources: D405
+users report 2.5x on low-texture surfaces)."""
+
+
+def peg_view_camera(offset=PEG_VIEW_OFFSET, aim=PEG_VIEW_AIM) -> np.ndarray:
+    """A camera mounted at `offset` aiming at `aim` (tool0 frame), in the peg-tip frame."""
+    x = np.subtract(aim, offset)
+    x /= np.linalg.norm(x)
+    y = np.cross([0.0, 0.0, 1.0], x)
+    y /= np.linalg.norm(y)
+    R = np.column_stack([x, y, np.cross(x, y)])  # SAPIEN: x forward, z up
+    return flange_pose(np.eye(4)) @ G.make(R, np.asarray(offset, dtype=np.float64))
+
+
+def point_noise(profile: SensorProfile, distance: float, iid_std: float = 0.001) -> float:
+    """One point's depth noise, m, at `distance` (stereo: axial noise on a plain part; iid:
+    the profile's std, else the task's)."""
+    d = profile.depth
+    if d.model == "stereo":
+        return PLAIN_PART_NOISE * distance**2 * d.disparity_noise_px / (d.focal_px * d.baseline)
+    return d.std if d.std is not None else iid_std
+
+
+def closed_loop_samples(
+    profile: SensorProfile, n: int, seed: int, points: int = 100, camera: np.ndarray | None = None
+) -> np.ndarray:
+    """(n, 2) residuals (lateral m, tilt deg) of the closed-loop servo under a profile's
+    mount and camera errors, drawn as `profile_floor_samples` draws them, with the tip, the
+    peg's axis and the opening each measured from `points` points of that noise."""
+    C = peg_view_camera() if camera is None else camera
+    he, d = profile.hand_eye, profile.depth
+    rng = np.random.default_rng(seed)
+    mounts = mount_errors(he.translation, he.rotation_deg, rng, n)
+    stereo = d.model == "stereo"
+    u = np.random.default_rng([seed, 1]).uniform(-1.0, 1.0, (n, 5))
+    depth = depth_errors(d, u if stereo else np.zeros((n, 5)))
+    focal_px = d.focal_px if stereo else 1.0
+    args = (depth["scale"], depth["offset"], depth["focal_ratio"], depth["principal"], focal_px)
+    cams = np.linalg.inv(C[None] @ mounts)  # tip frame -> the true camera frame
+    peg = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, -0.05, 1.0]])  # tip, 50 mm up the peg
+    tip, back = np.einsum("nij,kj->nki", cams, peg)[..., :3].transpose(1, 0, 2)
+    D = pre_insertion_hole()
+    o = np.einsum("nij,j->ni", cams, D[:, 3])[:, :3]  # the hole's opening, camera frame
+    z = np.einsum("nij,j->ni", cams[:, :3, :3], D[:3, 2])  # its axis (out of the face)
+    # Noise of what is fitted to `points` points each: a centre (the tip, the opening), the
+    # peg's axis along its visible 50 mm and the face's normal over a 15 mm-radius ring.
+    pt = point_noise(profile, float(np.linalg.norm(C[:3, 3])))
+    centre, along, ring = pt / np.sqrt(points), pt * np.sqrt(12 / points) / 0.05, pt / 0.015
+    ring /= np.sqrt(points / 2)
+    seen_tip = perceive(tip[:, None], *args)[:, 0] + rng.normal(0.0, centre, (n, 3))
+    seen_back = perceive(back[:, None], *args)[:, 0]
+    peg_axis = _tilted(_unit(seen_tip - seen_back), along, rng)
+    o_noise, z_noise = rng.normal(0.0, centre, (n, 3)), rng.standard_normal((n, 3))
+    for _ in range(30):  # move the hole (the camera rides with the peg) to the fixed point
+        seen_o = perceive(o[:, None], *args)[:, 0]
+        seen_z = _unit(perceive((o + 0.01 * z)[:, None], *args)[:, 0] - seen_o)
+        seen_o, seen_z = seen_o + o_noise, _tilted(seen_z, ring, None, z_noise)
+        o = o + (seen_tip + PRE_INSERT_HEIGHT * seen_z) - seen_o  # tip 30 mm out on the axis
+        z = _unit(z + (-peg_axis - seen_z))  # the axes opposed
+    lateral_vec = (tip - o) - np.sum((tip - o) * z, axis=1, keepdims=True) * z
+    axis = _unit(tip - back)
+    tilt = np.degrees(np.arccos(np.clip(-np.sum(axis * z, axis=1), -1.0, 1.0)))
+    return np.stack([np.linalg.norm(lateral_vec, axis=1), tilt], axis=1)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _tilted(v: np.ndarray, sigma: float, rng, draws: np.ndarray | None = None) -> np.ndarray:
+    """Unit vectors `v` turned by N(0, sigma) rad about random perpendicular axes (the
+    same turn for the same `draws`, (n, 3) standard normals)."""
+    w = rng.standard_normal(v.shape) if draws is None else draws
+    return _unit(v + sigma * (w - np.sum(w * v, axis=1, keepdims=True) * v))
+
+
 TABLE_VIEW_HEIGHT = 0.27
 """The camera's height above the table in the coarse view, for the table calibration's
 floor (the first views of 16 D405 6-DoF episodes: 185-332 mm, median 270)."""
@@ -212,8 +305,9 @@ def floor_p90(
 
 @dataclass
 class FloorArgs:
-    """Print the hand-eye floor of sensor profiles: the closed-loop residual a perfect
-    estimator of the hole leaves when it trusts the nominal camera mount."""
+    """Print the floors of sensor profiles: the residual a perfect estimator of the hole
+    leaves when it trusts the nominal camera mount (today's design), calibrated on the
+    table, and when the camera sees the peg and the loop closes on their offset."""
 
     sensors: list[str] = field(
         default_factory=lambda: ["realistic", "textured", "d435", "handeye_2mm_1deg"]
@@ -226,15 +320,18 @@ class FloorArgs:
     table_view_height: float = TABLE_VIEW_HEIGHT
     """The camera's height above the table in the coarse view (the table calibration's
     column)."""
+    points: int = 100
+    """Closed loop: points each of the tip, the peg's axis and the opening is measured from."""
 
 
 def main(args: FloorArgs) -> None:
     print(
         "| profile | hand-eye error | depth scale / intrinsics error "
         "| lateral p50 / p90 (hand-eye only) | tilt p50 / p90 "
-        "| calibrated on the table: lateral, tilt p50 / p90 |"
+        "| calibrated on the table: lateral, tilt p50 / p90 "
+        "| closed loop on the peg: lateral, tilt p50 / p90 |"
     )
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     for name in args.sensors:
         profile = load_profile(name)
         he, d = profile.hand_eye, profile.depth
@@ -245,6 +342,8 @@ def main(args: FloorArgs) -> None:
         tilt = np.percentile(s[:, 1], [50, 90])
         t = profile_floor_samples(profile, args.samples, args.seed, args.table_view_height)
         t_lat, t_tilt = 1000 * np.percentile(t[:, 0], [50, 90]), np.percentile(t[:, 1], [50, 90])
+        c = closed_loop_samples(profile, args.samples, args.seed, args.points)
+        c_lat, c_tilt = 1000 * np.percentile(c[:, 0], [50, 90]), np.percentile(c[:, 1], [50, 90])
         depth = "-"
         if d.model == "stereo":
             depth = (
@@ -255,7 +354,8 @@ def main(args: FloorArgs) -> None:
             f"| `{name}` | {1000 * he.translation:g} mm / {he.rotation_deg:g} deg | {depth} "
             f"| {lat[0]:.2f} / {lat[1]:.2f} mm ({lat_he[0]:.2f} / {lat_he[1]:.2f}) "
             f"| {tilt[0]:.2f} / {tilt[1]:.2f} deg "
-            f"| {t_lat[0]:.2f} / {t_lat[1]:.2f} mm, {t_tilt[0]:.2f} / {t_tilt[1]:.2f} deg |"
+            f"| {t_lat[0]:.2f} / {t_lat[1]:.2f} mm, {t_tilt[0]:.2f} / {t_tilt[1]:.2f} deg "
+            f"| {c_lat[0]:.2f} / {c_lat[1]:.2f} mm, {c_tilt[0]:.2f} / {c_tilt[1]:.2f} deg |"
         )
 
 

@@ -64,7 +64,7 @@ def test_check_names_the_cells_a_branch_changing_an_agent_leaves_stale(monkeypat
 
     docs_only = fingerprint(
         sources(
-            {"policies/cfvs/agent.py": ('"""The config of ablation `name`', '"""Ablation `name`')}
+            {"policies/cfvs/config.py": ('"""The config of ablation `name`', '"""Ablation `name`')}
         )
     )
     monkeypatch.setattr(trace, "code_fingerprint", lambda: docs_only)

@@ -203,12 +203,10 @@ users report 2.5x on low-texture surfaces)."""
 
 def peg_view_camera(offset=PEG_VIEW_OFFSET, aim=PEG_VIEW_AIM) -> np.ndarray:
     """A camera mounted at `offset` aiming at `aim` (tool0 frame), in the peg-tip frame."""
-    x = np.subtract(aim, offset)
-    x /= np.linalg.norm(x)
-    y = np.cross([0.0, 0.0, 1.0], x)
-    y /= np.linalg.norm(y)
-    R = np.column_stack([x, y, np.cross(x, y)])  # SAPIEN: x forward, z up
-    return flange_pose(np.eye(4)) @ G.make(R, np.asarray(offset, dtype=np.float64))
+    from cfvs_maniskill.rendering.views import look_at
+
+    mount = look_at(np.asarray(offset, dtype=np.float64), np.asarray(aim, dtype=np.float64))
+    return flange_pose(np.eye(4)) @ G.to_matrix(mount)
 
 
 def point_noise(profile: SensorProfile, distance: float, iid_std: float = 0.001) -> float:

@@ -44,7 +44,9 @@ class EpisodeResult:
     lateral_offset_m: float
     wall_time_s: float
     sensor: str = "ideal"
-    """The sensor profile the episode ran under."""
+    """The sensor profile the episode ran under ..."""
+    mount: str = "flange_side"
+    """... and the wrist camera's mount on the tool (its `mount`, robots/mounts.py)."""
     provenance: dict = field(default_factory=dict)
     """Which code, weights, sensor profile, task and object files made it (provenance.py)."""
     move_residuals: list = field(default_factory=list)
@@ -209,6 +211,7 @@ def run_episode(
         ),
         wall_time_s=round(time.perf_counter() - t0, 3),
         sensor=u.sensor_profile.name,
+        mount=u.camera_mount.name,
         provenance=provenance.of_episode(env, getattr(agent, "weights", {})),
         move_residuals=residuals,
         agent_error=None if failure is None else failure.to_json(),

@@ -72,7 +72,7 @@ def held_out_outcomes(
     ex = Executor(env)
     out = {}
     for label, kwargs in configs.items():
-        agent = CFVSAgent(TaskSpec.of(env.unwrapped.task), CFVSConfig(**kwargs))
+        agent = CFVSAgent(TaskSpec.of_env(env), CFVSConfig(**kwargs))
         r = run_episode(env, agent, ex, seed=seed)
         last = r.move_residuals[-1][0] if r.move_residuals else float("inf")
         out[label] = (r.success, r.reason, last)

@@ -164,7 +164,7 @@ def test_hand_eye_error_moves_the_cloud_rigidly_by_the_stated_amount(make_env, t
     pts = x[x[:, 3] > 0, :3]
     M = told @ G.inv(true_cam.astype(np.float64))  # true world -> reported world
     true_pts = (pts - M[:3, 3]) @ M[:3, :3]
-    table_true = true_pts[np.abs(true_pts[:, 2]) < 0.004]
+    table_true = true_pts[np.abs(true_pts[:, 2]) < 0.003]
     assert len(table_true) > 1000 and np.abs(table_true[:, 2]).max() < 0.0015
     near = pts[np.abs(pts[:, 2]) < 0.02]
     A = np.column_stack([near[:, 0], near[:, 1], np.ones(len(near))])

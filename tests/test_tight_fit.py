@@ -25,7 +25,7 @@ from cfvs_maniskill.envs.task_config import TaskConfigError, load_task
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.policies.oracle.agent import OracleAgent
 from cfvs_maniskill.policies.registry import make_agent
-from cfvs_maniskill.robots.ur5 import chamfered_peg_mesh
+from cfvs_maniskill.robots.peg import chamfered_peg_mesh
 
 TIGHT = "PegInsert6DoF-0.5mm-v1"
 

@@ -115,7 +115,7 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
         "PegInsert6DoF-v1",
         "heldout_c",
         "heldoutc_wall_bracket",
-        191,
+        203,
         {
             "nearest": {"clear_view": False, "turn_when_blind": False},
             "turned": {"clear_view": False},

@@ -102,6 +102,8 @@ class PegInsertEnv(BaseEnv):
         """The sensor profile (`sensors/<name>.yaml`): depth camera, hand-eye, wrench."""
         self.depth_noise_std = depth_noise(cfg, self.sensor_profile, depth_noise_std)
         self.sensing = SensorModel(self.sensor_profile, self.depth_noise_std)
+        self.camera_mount = self.sensor_profile.camera_mount
+        """Where the wrist camera sits on the tool (the profile's `mount`)."""
         self.camera_geometry = camera_geometry(cfg, self.sensor_profile)
         """(width, height, vertical fov) of the wrist camera: the profile's field of view."""
         self.wrist = WristSensing(self.sensing, self.depth_noise_std, *self.camera_geometry[:2])
@@ -181,6 +183,7 @@ class PegInsertEnv(BaseEnv):
         super()._load_agent(options, sapien.Pose())
         a = self.agent
         a.camera_width, a.camera_height, a.camera_fov = self.camera_geometry
+        a.camera_mount = self.camera_mount
 
     def _load_scene(self, options: dict):
         self.table = build_table(self.scene)

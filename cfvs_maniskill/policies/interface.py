@@ -14,7 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any
 
+import numpy as np
+
 # The tool's poses from the robot's drawing, part of what an agent may use.
+from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT, MOUNTS, Mount
 from cfvs_maniskill.robots.poses import camera_in_tcp, flange_pose, insertion_pose
 
 __all__ = [
@@ -42,11 +45,24 @@ class TaskSpec:
     workspace_y: tuple[float, float]
     camera_width: int
     camera_height: int
+    mount: Mount = MOUNTS[DEFAULT_MOUNT]
+    """Where the wrist camera sits on the tool, as drawn (the sensor profile's mount)."""
 
     @staticmethod
-    def of(task: Any) -> TaskSpec:
-        """From a TaskConfig (or anything with these fields)."""
-        return TaskSpec(**{f.name: getattr(task, f.name) for f in fields(TaskSpec)})
+    def of(task: Any, mount: Mount | None = None) -> TaskSpec:
+        """From a TaskConfig (or anything with these fields) and the camera's mount."""
+        known = {f.name: getattr(task, f.name) for f in fields(TaskSpec) if f.name != "mount"}
+        return TaskSpec(**known, mount=mount or MOUNTS[DEFAULT_MOUNT])
+
+    @staticmethod
+    def of_env(env: Any) -> TaskSpec:
+        """What an agent may know of a made env: its task file and its camera's mount."""
+        u = env.unwrapped
+        return TaskSpec.of(u.task, u.camera_mount)
+
+    def camera_in_tcp(self) -> np.ndarray:
+        """The camera's optical centre in the peg-tip frame, on this task's mount."""
+        return camera_in_tcp(self.mount)
 
 
 ALLOWED_OBS = {

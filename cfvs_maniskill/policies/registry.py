@@ -33,7 +33,6 @@ PRIVILEGED = {name for name, e in AGENTS.items() if e.privileged}
 
 def _user_agent(spec: str) -> type[Agent]:
     """`package.module:Class` -> the class, checked to be an Agent built from a TaskSpec."""
-    import importlib
     import inspect
 
     module_name, _, class_name = spec.partition(":")
@@ -121,7 +120,7 @@ def make_agent(name: str, env) -> Agent:
     factory = entry.make
     with track_weights() as loaded:
         try:
-            agent = factory(env) if entry.privileged else factory(TaskSpec.of(env.unwrapped.task))
+            agent = factory(env) if entry.privileged else factory(TaskSpec.of_env(env))
         except WeightsError:
             raise  # a missing or wrong weights file: the caller names it and stops
         except Exception as e:  # a bug in the agent's constructor fails its episodes

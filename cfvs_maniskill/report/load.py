@@ -105,6 +105,7 @@ def load_records(
             rec["label"], rec["init"] = label, init_label(rec)
             rec["dof"] = task_dof(rec)
             rec.setdefault("sensor", "ideal")  # records from before sensor profiles
+            rec.setdefault("mount", "flange_side")  # ... and before mounts were named
             # A crashed job has no outcome: in no success rate, listed by the report.
             (crashed if rec.get("crashed") else out).append(rec)
     if crashed:

@@ -8,6 +8,7 @@ import numpy as np
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import PEG_LENGTH
+from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT, MOUNTS, Mount
 
 
 def insertion_pose(peg: str, hole: np.ndarray, depth: float, ref: np.ndarray) -> np.ndarray:
@@ -31,9 +32,7 @@ def flange_pose(tcp: np.ndarray) -> np.ndarray:
     return T
 
 
-def camera_in_tcp() -> np.ndarray:
+def camera_in_tcp(mount: Mount | None = None) -> np.ndarray:
     """The wrist camera's optical centre in the peg-tip (tcp) frame, from the robot's
-    drawing (its nominal mount: the calibration the robot believes, not the true one)."""
-    from cfvs_maniskill.robots.ur5 import CAMERA_OFFSET
-
-    return np.asarray(CAMERA_OFFSET, dtype=np.float64) - np.array([0.0, 0.0, PEG_LENGTH])
+    drawing: `mount` (default DEFAULT_MOUNT), the nominal one the robot believes."""
+    return (mount or MOUNTS[DEFAULT_MOUNT]).in_tcp()[:3, 3]

@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 import sapien
-import trimesh
 from mani_skill.agents.base_agent import BaseAgent, Keyframe
 from mani_skill.agents.controllers import (
     PDJointPosControllerConfig,
@@ -40,10 +39,12 @@ from mani_skill.agents.controllers import (
 )
 from mani_skill.agents.registration import REGISTERED_AGENTS, register_agent
 from mani_skill.sensors.camera import CameraConfig
-from scipy.spatial.transform import Rotation
 
+from cfvs_maniskill import geometry as G
 from cfvs_maniskill import resources
 from cfvs_maniskill.constants import PEG_LENGTH, ROUND_PEG_RADIUS, SQUARE_PEG_SIDE
+from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT, MOUNTS, Mount
+from cfvs_maniskill.robots.peg import chamfered_peg_mesh
 
 ARM_JOINTS = (
     "shoulder_pan_joint",
@@ -76,11 +77,6 @@ TOOL_LINK = "tool0"
 CAMERA_UID = "wrist_camera"
 STEREO_UIDS = ("wrist_left", "wrist_right")
 """The wrist camera's two stereo imagers (envs made with stereo=True; image agents, KOVIS)."""
-CAMERA_OFFSET = np.array([0.11, 0.0, 0.05])
-"""Camera position in tool0 (m): 11 cm off the tool axis, 5 cm forward of the flange on a
-bracket, so its view of the hole passes beside the peg even 5 cm above the hole."""
-CAMERA_AIM = np.array([0.0, 0.0, 0.30])
-"""Point on the tool axis (tool0 frame, m) the optical axis goes through: 20 cm past the tip."""
 CAMERA_FOV = np.deg2rad(70.0)
 """Vertical field of view, radians."""
 
@@ -101,14 +97,10 @@ def _ur5_dir() -> Path:
     )
 
 
-def camera_pose_in_tool() -> sapien.Pose:
-    """Mount pose of the wrist camera in tool0 (SAPIEN cameras look along their +x)."""
-    x = CAMERA_AIM - CAMERA_OFFSET
-    x /= np.linalg.norm(x)
-    y = np.array([0.0, 1.0, 0.0])
-    z = np.cross(x, y)
-    q = Rotation.from_matrix(np.stack([x, y, z], axis=1)).as_quat()  # x y z w
-    return sapien.Pose(p=CAMERA_OFFSET, q=[q[3], q[0], q[1], q[2]])
+def camera_pose_in_tool(mount: Mount | None = None) -> sapien.Pose:
+    """Pose of the wrist camera in tool0 on `mount` (default: DEFAULT_MOUNT's); SAPIEN
+    cameras look along their +x."""
+    return G.to_pose((mount or MOUNTS[DEFAULT_MOUNT]).in_tool())
 
 
 def _link(name: str, geometry: ET.Element | None, z_center: float, mass: float) -> ET.Element:
@@ -133,26 +125,6 @@ def _fixed(name: str, parent: str, child: str, xyz: str, rpy: str) -> ET.Element
     ET.SubElement(j, "child", link=child)
     ET.SubElement(j, "origin", xyz=xyz, rpy=rpy)
     return j
-
-
-def chamfered_peg_mesh(profile: str, chamfer: float) -> trimesh.Trimesh:
-    """The peg as a convex solid in tool0 coordinates (flange at z = 0, tip at z = PEG_LENGTH)
-    with its tip edges cut at 45 deg by `chamfer` metres: the tip face is 2 x chamfer narrower,
-    so it starts into a tight hole with that much more lateral / yaw error, and the chamfer
-    then slides on the hole's edge and centres the peg (design for assembly)."""
-    L = PEG_LENGTH
-    if profile == "round":
-        a = np.linspace(0, 2 * np.pi, 128, endpoint=False)
-        # Circumscribe the true circle at the full radius: the polygon's flats then sit
-        # 0.0075 mm inside it, negligible against any clearance a task file accepts.
-        ring = np.stack([np.cos(a), np.sin(a)], 1) * ROUND_PEG_RADIUS / np.cos(np.pi / 128)
-        rings = [(ring, 0.0), (ring, L - chamfer), (ring * (1 - chamfer / ROUND_PEG_RADIUS), L)]
-    else:
-        h = SQUARE_PEG_SIDE / 2
-        sq = np.array([[h, h], [-h, h], [-h, -h], [h, -h]])
-        rings = [(sq, 0.0), (sq, L - chamfer), (sq * (h - chamfer) / h, L)]
-    pts = np.concatenate([np.c_[xy, np.full(len(xy), z)] for xy, z in rings])
-    return trimesh.convex.convex_hull(pts)
 
 
 def build_urdf(profile: str, chamfer: float = 0.0, mesh_file: str = "") -> str:
@@ -231,15 +203,16 @@ class _UR5Peg(BaseAgent):
     camera_width = 128
     camera_height = 128
     camera_fov = float(CAMERA_FOV)
-    """Wrist-camera resolution and vertical field of view (rad); the env sets them from the
-    task file and the sensor profile before the scene is built."""
+    camera_mount = MOUNTS[DEFAULT_MOUNT]
+    """Wrist-camera resolution, vertical field of view (rad) and mount; the env sets them
+    from the task file and the sensor profile before the scene is built."""
 
     @property
     def _sensor_configs(self):
         return [
             CameraConfig(
                 uid=CAMERA_UID,
-                pose=camera_pose_in_tool(),
+                pose=camera_pose_in_tool(self.camera_mount),
                 width=self.camera_width,
                 height=self.camera_height,
                 fov=self.camera_fov,

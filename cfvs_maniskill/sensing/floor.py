@@ -40,17 +40,14 @@ import tyro
 
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
-from cfvs_maniskill.robots.poses import flange_pose
+from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT, MOUNTS
 from cfvs_maniskill.sensing.model import depth_errors, mount_errors
 from cfvs_maniskill.sensing.profile import SensorProfile, load_profile
 
 
-def camera_in_tip() -> np.ndarray:
-    """The wrist camera's nominal mount (SAPIEN camera frame) in the peg-tip frame."""
-    from cfvs_maniskill.robots.ur5 import camera_pose_in_tool
-
-    tool0 = flange_pose(np.eye(4))  # the flange in the tip frame
-    return tool0 @ np.asarray(camera_pose_in_tool().to_transformation_matrix(), np.float64)
+def camera_in_tip(mount: str = DEFAULT_MOUNT) -> np.ndarray:
+    """The wrist camera on a named mount (SAPIEN camera frame) in the peg-tip frame."""
+    return MOUNTS[mount].in_tcp()
 
 
 def pre_insertion_hole() -> np.ndarray:
@@ -189,24 +186,9 @@ def profile_floor_samples(
     return depth_residuals(mounts, depth, focal_px, K)
 
 
-PEG_VIEW_OFFSET = (0.075, 0.0, 0.02)
-"""A mount that sees the peg: the camera 75 mm off the tool axis, 20 mm below the flange
-(tool0 frame, m), as a bracket beside a UR flange holds a D405 (42 x 42 x 23 mm)."""
-PEG_VIEW_AIM = (0.0, 0.0, 0.13)
-"""... aimed at the tool axis 30 mm past the tip (the peg is 100 mm long): the opening at
-the pre-insertion pose, the tip 0.11 m and the opening 0.13 m away, beyond the D405's 7 cm
-minimum range, both near the image's centre."""
 PLAIN_PART_NOISE = 2.5
 """Stereo noise on a plain part against a textured target (the profiles' sources: D405
 users report 2.5x on low-texture surfaces)."""
-
-
-def peg_view_camera(offset=PEG_VIEW_OFFSET, aim=PEG_VIEW_AIM) -> np.ndarray:
-    """A camera mounted at `offset` aiming at `aim` (tool0 frame), in the peg-tip frame."""
-    from cfvs_maniskill.rendering.views import look_at
-
-    mount = look_at(np.asarray(offset, dtype=np.float64), np.asarray(aim, dtype=np.float64))
-    return flange_pose(np.eye(4)) @ G.to_matrix(mount)
 
 
 def point_noise(profile: SensorProfile, distance: float, iid_std: float = 0.001) -> float:
@@ -224,7 +206,7 @@ def closed_loop_samples(
     """(n, 2) residuals (lateral m, tilt deg) of the closed-loop servo under a profile's
     mount and camera errors, drawn as `profile_floor_samples` draws them, with the tip, the
     peg's axis and the opening each measured from `points` points of that noise."""
-    C = peg_view_camera() if camera is None else camera
+    C = camera_in_tip("peg_view") if camera is None else camera
     he, d = profile.hand_eye, profile.depth
     rng = np.random.default_rng(seed)
     mounts = mount_errors(he.translation, he.rotation_deg, rng, n)

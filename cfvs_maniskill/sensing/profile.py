@@ -1,8 +1,9 @@
 """Sensor profiles: one small YAML file each in `sensors/` (or any path), chosen per run with
 `--sensor NAME`. A profile says how the wrist depth camera errs, how far off the hand-eye
-calibration is, how noisy the wrist force/torque sensor is, and how far apart the
-camera's two imagers are; nothing downstream may assume one profile's numbers. Unknown
-fields and profiles are errors that name them."""
+calibration is, how noisy the wrist force/torque sensor is, how far apart the
+camera's two imagers are and where the camera is mounted on the tool (`mount`); nothing
+downstream may assume one profile's numbers. Unknown fields and profiles are errors that
+name them."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pydantic import Field
 
 from cfvs_maniskill import resources
 from cfvs_maniskill.errors import FileFieldError
+from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT, MOUNTS, Mount
 from cfvs_maniskill.sensing.surfaces import MATERIALS
 from cfvs_maniskill.validation import STRICT, validate_file
 
@@ -165,6 +167,44 @@ class Surfaces:
 
 
 @dataclass(frozen=True)
+class CameraMount:
+    """Where the wrist camera sits on the tool (robots/mounts.py): a named mount, or this
+    profile's own bracket (`position` and `aim` in the flange frame, m, and its `source`)."""
+
+    __pydantic_config__ = STRICT
+
+    name: str = DEFAULT_MOUNT
+    position: tuple[float, float, float] | None = None
+    aim: tuple[float, float, float] | None = None
+    source: str = ""
+
+    def resolve(self, path: Path | str = "<profile>") -> Mount:
+        """The mount this section names or describes; errors name the field."""
+        if self.position is None and self.aim is None:
+            if self.name not in MOUNTS:
+                raise SensorProfileError(
+                    path,
+                    "mount.name",
+                    f"one of {', '.join(MOUNTS)} (or give position, aim and source), "
+                    f"got {self.name!r}",
+                )
+            return MOUNTS[self.name]
+        for k in ("position", "aim", "source"):
+            if not getattr(self, k):
+                raise SensorProfileError(
+                    path, f"mount.{k}", "a mount of its own needs position, aim and source"
+                )
+        if self.name in MOUNTS:
+            raise SensorProfileError(
+                path, "mount.name", f"{self.name!r} is a named mount; call this one otherwise"
+            )
+        mount = Mount(self.name, self.position, self.aim, self.source)
+        if problem := mount.check():
+            raise SensorProfileError(path, "mount.aim", problem)
+        return mount
+
+
+@dataclass(frozen=True)
 class SensorProfile:
     """A profile file's schema (validation.py) and the profile it gives."""
 
@@ -180,15 +220,24 @@ class SensorProfile:
     wrench: Wrench = field(default_factory=Wrench)
     imager: Imager = field(default_factory=Imager)
     surfaces: Surfaces = field(default_factory=Surfaces)
+    mount: CameraMount = field(default_factory=CameraMount)
     source: str = ""
     """The file it was read from."""
 
+    @property
+    def camera_mount(self) -> Mount:
+        return self.mount.resolve(self.source or self.name)
 
-_SECTIONS = ("depth", "hand_eye", "wrench", "imager", "surfaces")
+
+_SECTIONS = ("depth", "hand_eye", "wrench", "imager", "surfaces", "mount")
 
 
 def _empty_sections_default(data: dict) -> dict:
-    return {k: v for k, v in data.items() if not (k in _SECTIONS and v is None)}
+    """Empty sections take their defaults; `mount: NAME` is short for `mount: {name: NAME}`."""
+    data = {k: v for k, v in data.items() if not (k in _SECTIONS and v is None)}
+    if isinstance(data.get("mount"), str):
+        data["mount"] = {"name": data["mount"]}
+    return data
 
 
 def load_profile_file(path: Path) -> SensorProfile:
@@ -208,6 +257,7 @@ def load_profile_file(path: Path) -> SensorProfile:
         raise SensorProfileError(
             path, "surfaces.part_material", f"one of {', '.join(MATERIALS)}, got {material!r}"
         )
+    profile.mount.resolve(path)  # a bad mount is the file's error, not the env's
     return profile
 
 

@@ -35,6 +35,8 @@ def camera_geometry(task, profile: SensorProfile) -> tuple[int, int, float]:
 class WristSensing:
     def __init__(self, model: SensorModel, iid_std: float, width: int, height: int):
         self.model = model
+        self.nominal = camera_pose_in_tool(model.profile.camera_mount)
+        """The camera's pose in tool0 on the profile's mount, as drawn (no error)."""
         self.iid_std = iid_std
         """Per-point depth noise of an iid model, m."""
         self.width, self.height = width, height
@@ -84,7 +86,7 @@ class WristSensing:
     def imager_pose(self, uid: str, mount: sapien.Pose | None = None) -> sapien.Pose:
         """A stereo imager in tool0: the wrist camera's pose (nominal, or on the episode's
         miscalibrated `mount`), the right one moved by the baseline along the image x."""
-        left = camera_pose_in_tool() * (mount or sapien.Pose())
+        left = self.nominal * (mount or sapien.Pose())
         if uid == STEREO_UIDS[0]:
             return left
         return left * sapien.Pose(p=[0.0, -self.model.profile.imager.stereo_baseline, 0.0])
@@ -103,7 +105,7 @@ class WristSensing:
         miscalibrated mount; a restored state calls this after `seek`."""
         self.model.start_episode(self.seed)
         mount = G.to_pose(self.model.mount)
-        sensors[CAMERA_UID].camera.set_local_pose(camera_pose_in_tool() * mount)
+        sensors[CAMERA_UID].camera.set_local_pose(self.nominal * mount)
         if stereo:  # one rigid camera body: the imagers share the mount's error
             for uid in STEREO_UIDS:
                 sensors[uid].camera.set_local_pose(self.imager_pose(uid, mount))
@@ -121,6 +123,8 @@ class WristSensing:
 
     def corrupt(self, obs: dict) -> dict:
         """The observation as the profile's camera delivers it (changed in place)."""
+        if "pointcloud" in obs:
+            self._unbias_render(obs)
         if not self.model.is_iid:
             return self._stereo(obs)
         self._misreport_camera(obs)
@@ -145,6 +149,18 @@ class WristSensing:
             self.shapes = shapes
             self.draws += 1
         return obs
+
+    def _unbias_render(self, obs: dict) -> None:
+        """The renderer writes camera-space positions in whole millimetres, truncated toward
+        zero (SAPIEN's minimal shader: `ivec3(position * 1000)`): every surface comes up to
+        1 mm nearer the camera, 0.5 mm on average. Each point goes to the middle of its
+        millimetre, leaving an unbiased +-0.5 mm quantisation."""
+        T = torch.as_tensor(self._true_camera(obs)["cam2world_gl"])
+        xyzw = obs["pointcloud"]["xyzw"]
+        R, t = T[:3, :3].to(xyzw.device), T[:3, 3].to(xyzw.device)
+        local = (xyzw[..., :3].double() - t) @ R  # world -> camera (OpenGL axes), metres
+        local += 0.0005 * torch.sign(torch.round(local * 1000.0))
+        xyzw[..., :3] = (local @ R.T + t).to(xyzw.dtype)
 
     @staticmethod
     def _true_camera(obs: dict) -> dict[str, np.ndarray]:

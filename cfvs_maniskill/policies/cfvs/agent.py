@@ -38,13 +38,15 @@ from cfvs_maniskill.perception.clouds import (
     world_object_points,
 )
 from cfvs_maniskill.perception.opening import MIN_LEVEL_POINTS, face_height, fit_opening
+from cfvs_maniskill.perception.peg import apply as apply_correction
+from cfvs_maniskill.perception.peg import peg_correction
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
 from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_from_table
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.policies.base import Action, Agent, Observation
 from cfvs_maniskill.policies.cfvs.config import CFVSConfig
 from cfvs_maniskill.policies.cfvs.oakn import weighted_keypoints
-from cfvs_maniskill.policies.interface import TaskSpec, camera_in_tcp, insertion_pose
+from cfvs_maniskill.policies.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.policies.networks import load_weights
 from cfvs_maniskill.task_dof import constrain
 from cfvs_maniskill.validation import read_yaml
@@ -105,10 +107,12 @@ class CFVSAgent(Agent):
         self.fine_steps = 0
         self.had_face = False
         self.correction = IDENTITY
+        self.peg_fix: np.ndarray | None = None
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
         self.correction = IDENTITY  # the camera's errors change with the episode
+        self.peg_fix = None
         self.had_face = False  # whether any fine estimate had its face seen round it
         self.blind_x: list[np.ndarray] = []  # tool x axes whose fine look saw nothing
         self.phase, self.estimate = "", None
@@ -220,7 +224,7 @@ class CFVSAgent(Agent):
         if not (self.cfg.clear_view and self.peg == "square" and self.task.dof != 3):
             return nearest  # a 3-DoF peg keeps its yaw (task_dof.constrain)
         poses = approach_yaws(nearest, tcp[:3, 0])
-        i, _ = clear_view_yaw(world, poses, camera_in_tcp(), H)
+        i, _ = clear_view_yaw(world, poses, self.task.camera_in_tcp(), H)
         return poses[i]
 
     def turn(self, tcp: np.ndarray) -> Action | None:
@@ -242,15 +246,20 @@ class CFVSAgent(Agent):
     def calibrated_points(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray:
         """The cloud's world points that saw something, with the episode's table
         calibration applied (measured on the coarse view, where most of the table is in
-        sight)."""
+        sight), then moved onto the peg it shows (`peg_calibration`, measured on the same
+        view, where no part stands near the peg)."""
         world = valid_world_points(xyzw)
-        if not self.cfg.table_calibration:
-            return world
-        camera = tcp.copy()  # the tool's axes serve: the camera is fixed to the tool
-        camera[:3, 3] = tcp[:3, :3] @ camera_in_tcp() + tcp[:3, 3]
-        if self.stage == "coarse":
-            self.correction = correction_from_table(world, camera) or IDENTITY
-        return self.correction.apply(world.astype(np.float64), camera)
+        if self.cfg.table_calibration:
+            camera = tcp.copy()  # the tool's axes serve: the camera is fixed to the tool
+            camera[:3, 3] = tcp[:3, :3] @ self.task.camera_in_tcp() + tcp[:3, 3]
+            if self.stage == "coarse":
+                self.correction = correction_from_table(world, camera) or IDENTITY
+            world = self.correction.apply(world.astype(np.float64), camera)
+        if self.cfg.peg_calibration:
+            if self.stage == "coarse":  # nothing stands near the peg yet
+                self.peg_fix = peg_correction(world, tcp, self.peg, self.task.peg_chamfer)
+            world = apply_correction(self.peg_fix, world, tcp)
+        return world
 
     # ------------------------------------------------------------------ decisions
     def act(self, observation: Observation) -> Action:

@@ -89,6 +89,11 @@ class CFVSConfig:
     """Correct the camera's depth scale and two of its mount angles once per episode, from
     the table plane in the coarse view, whose height the robot knows
     (perception/table_calibration.py). False: the cloud as the camera reports it."""
+    peg_calibration: bool = True
+    """Where the camera sees the peg (a mount like `peg_view`), move every cloud so the peg
+    it shows sits where the arm holds it (perception/peg.py): the hole is then placed
+    relative to the peg's tip as the camera sees both, whatever the hand-eye error. False:
+    the cloud as the (table-calibrated) camera places it."""
     weights_dir: Path = WEIGHTS_DIR
 
     def __post_init__(self) -> None:
@@ -140,6 +145,7 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     "no_turn": ("turn_when_blind", "give up when a fine look sees nothing round the peg"),
     "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
     "no_table_calibration": ("table_calibration", "the cloud as reported, not set by the table"),
+    "no_peg_calibration": ("peg_calibration", "the cloud not moved onto the peg it shows"),
 }
 """`cfvs_<name>`: CFVS with one component changed (the switch, then what it says)."""
 

@@ -84,7 +84,7 @@ def diagnose(args: DiagnoseArgs) -> dict:
             )
             return action, s
 
-    agent = Probe(TaskSpec.of(u.task))
+    agent = Probe(TaskSpec.of_env(env))
     weights = agent.cfg.weights_dir / f"{agent.task.peg}.pt"
     session = Session(env, agent, Executor(env))  # the probe, not a registry agent
     episodes = []

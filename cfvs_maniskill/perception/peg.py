@@ -1,0 +1,95 @@
+"""The peg in the wrist cloud: where the camera sees the peg against where the arm holds it.
+
+The peg is rigid on the flange, so the robot knows where it is (forward kinematics); the
+camera reports it elsewhere by exactly the error of its own pose (the hand-eye calibration)
+and, less, its depth scale. Fitting the peg's known solid to its points gives that error as
+a rigid move, and moving the whole cloud by it places the hole where it stands relative to
+the peg's tip: a servo on that cloud closes the loop on the peg-to-hole offset the camera
+sees, and the mount error cancels (endpoint closed-loop visual servoing; Hutchinson, Hager
+& Corke 1996). A camera that does not see the peg (`flange_side`) gives no fit, and the
+cloud stays as reported.
+
+The fit is point-to-plane ICP against the planes that bound the peg (robots/peg.py), damped
+so that what the points do not show stays put: the turn about a round peg's axis, and the
+move along the axis when the tip's end face is out of view (neither moves the opening ahead
+of the tip sideways).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from cfvs_maniskill import geometry as G
+from cfvs_maniskill.constants import peg_half_extent
+from cfvs_maniskill.perception.clouds import world_to_tool
+from cfvs_maniskill.robots.peg import peg_planes
+
+REACH = 0.06
+"""Peg points within this length of the tip (tcp frame) are fitted: the part of the peg
+next to the opening, clear of the flange and the wrist."""
+SEARCH_MARGIN = 0.006
+"""First pass: points within this distance of the peg's drawn solid: beyond any hand-eye
+error a calibrated cell leaves (a few mm, under a degree at 10 cm)."""
+INLIER_SIGMAS = 3.0
+"""Later passes: points within this many robust sigmas of the fitted surface ..."""
+MIN_INLIER_BAND = 0.0015
+"""... and never a narrower band than this (a noise-free cloud's sigma is ~0)."""
+MIN_PEG_POINTS = 200
+"""Fewer peg points than this: the camera does not see the peg (no fit)."""
+MAX_CORRECTION = (0.01, 5.0)
+"""A fit that moves the peg further than this (m, deg) found something else: no fit."""
+ITERATIONS = 12
+DAMPING = 1e-6
+"""Per point, added to each diagonal entry of the normal equations: far below what any
+direction the points constrain gathers, it keeps the unconstrained ones at zero."""
+
+
+def peg_correction(
+    world: np.ndarray, tcp: np.ndarray, peg: str, chamfer: float = 0.0
+) -> np.ndarray | None:
+    """The rigid 4x4 move, in the tool (tcp) frame, that puts the peg the cloud `world`
+    (K, 3) shows onto the peg the tcp pose `tcp` holds; None when too little of the peg is
+    in view. The camera rides on the tool, so the move holds for every view of an episode
+    (`apply`): fitted once where nothing stands near the peg, no part is taken for it."""
+    p = world_to_tool(world, tcp).astype(np.float64)
+    n, d = peg_planes(peg, chamfer)
+    half = peg_half_extent(peg) + SEARCH_MARGIN
+    near = (np.abs(p[:, 0]) <= half) & (np.abs(p[:, 1]) <= half)
+    near &= (p[:, 2] >= -REACH) & (p[:, 2] <= SEARCH_MARGIN)
+    p = p[near]
+    if len(p) < MIN_PEG_POINTS:
+        return None
+    T = np.eye(4)  # seen tcp-frame points -> where the arm holds them
+    band = SEARCH_MARGIN
+    for _ in range(ITERATIONS):
+        q = p @ T[:3, :3].T + T[:3, 3]
+        signed = q @ n.T - d  # (M, K) distance to each bounding plane
+        face = np.argmax(signed, axis=1)
+        r = signed[np.arange(len(q)), face]
+        keep = np.abs(r) <= band
+        if keep.sum() < MIN_PEG_POINTS:
+            return None
+        q, r, nf = q[keep], r[keep], n[face[keep]]
+        J = np.hstack([np.cross(q, nf), nf])  # d r / d (turn, move), small-angle
+        A = J.T @ J + DAMPING * len(q) * np.eye(6)
+        step = np.linalg.solve(A, -J.T @ r)
+        dT = G.make(Rotation.from_rotvec(step[:3]).as_matrix(), step[3:])
+        T = dT @ T
+        sigma = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+        band = max(INLIER_SIGMAS * sigma, MIN_INLIER_BAND)
+        if np.linalg.norm(step[3:]) < 1e-6 and np.linalg.norm(step[:3]) < 1e-5:
+            break
+    move, turn = np.linalg.norm(T[:3, 3]), np.degrees(Rotation.from_matrix(T[:3, :3]).magnitude())
+    if move > MAX_CORRECTION[0] or turn > MAX_CORRECTION[1]:
+        return None
+    return T
+
+
+def apply(T: np.ndarray | None, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+    """World points of a view from tcp pose `tcp` moved by a tool-frame correction
+    (`peg_correction`; None: as they are)."""
+    if T is None:
+        return world
+    C = tcp @ T @ G.inv(tcp)
+    return (world @ C[:3, :3].T + C[:3, 3]).astype(world.dtype)

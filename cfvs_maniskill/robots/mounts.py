@@ -1,0 +1,79 @@
+"""Where the wrist camera sits on the tool: its mount, a field of the sensor profile
+(`mount:`). Named mounts live here; a profile may also give its own bracket's geometry.
+
+A mount is the camera's position in the flange (tool0) frame and the point it aims at; the
+image's horizontal axis stays along the tool's y. Pure geometry, light: the env places the
+rendered camera with it and the agents read it from the robot's drawing (TaskSpec).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cfvs_maniskill.constants import PEG_LENGTH
+
+
+@dataclass(frozen=True)
+class Mount:
+    name: str
+    position: tuple[float, float, float]
+    """Camera centre in tool0 (m)."""
+    aim: tuple[float, float, float]
+    """The point in tool0 its optical axis passes through (m)."""
+    source: str = ""
+    """Where the geometry comes from (a bracket's drawing, or why it was chosen)."""
+
+    def in_tool(self) -> np.ndarray:
+        """4x4 camera pose in tool0, SAPIEN's camera axes (x forward, y left, z up)."""
+        p, aim = np.asarray(self.position, float), np.asarray(self.aim, float)
+        x = (aim - p) / np.linalg.norm(aim - p)
+        y = np.array([0.0, 1.0, 0.0]) - x[1] * x  # the image's horizontal stays on tool y
+        y /= np.linalg.norm(y)
+        T = np.eye(4)
+        T[:3, :3] = np.stack([x, y, np.cross(x, y)], axis=1)
+        T[:3, 3] = p
+        return T
+
+    def in_tcp(self) -> np.ndarray:
+        """4x4 camera pose in the peg-tip (tcp) frame: PEG_LENGTH past the flange."""
+        T = self.in_tool()
+        T[2, 3] -= PEG_LENGTH
+        return T
+
+    def check(self) -> str | None:
+        """What is wrong with the geometry, or None."""
+        if np.linalg.norm(np.subtract(self.aim, self.position)) < 1e-3:
+            return "aim must be at least 1 mm from position"
+        x = np.subtract(self.aim, self.position)
+        if abs(x[1]) > 0.99 * np.linalg.norm(x):
+            return "the optical axis must not run along the tool's y axis"
+        return None
+
+
+MOUNTS = {
+    m.name: m
+    for m in (
+        Mount(
+            "flange_side",
+            (0.11, 0.0, 0.05),
+            (0.0, 0.0, 0.30),
+            "11 cm off the tool axis, 5 cm forward of the flange, aimed 20 cm past the tip: "
+            "the hole is seen beside the peg from 5 cm above it; the peg's tip is outside "
+            "the view, so the cloud is placed by the hand-eye calibration alone",
+        ),
+        Mount(
+            "peg_view",
+            (0.075, 0.0, 0.02),
+            (0.0, 0.0, 0.13),
+            "75 mm off the tool axis, 20 mm forward of the flange (a D405, 42 x 42 x 23 mm, "
+            "on a bracket beside a 63 mm UR flange), aimed at the tool axis 30 mm past the "
+            "tip: at the pre-insertion pose the tip is 0.11 m and the opening 0.13 m away, "
+            "beyond the D405's 7 cm minimum range, both near the image's centre",
+        ),
+    )
+}
+"""Named mounts; a profile's `mount.name` picks one (or gives its own geometry)."""
+
+DEFAULT_MOUNT = "flange_side"

@@ -42,7 +42,8 @@ BAD = {
 }
 """Bad-value kinds: a value for the field's type, or None to leave the key out."""
 
-NEGATIVE_ALLOWED = {"workspace_y", "yaw_deg", "hole_at", "hole_frame.origin", "hole_frame.axis"}
+NEGATIVE_ALLOWED = {"workspace_y", "yaw_deg", "hole_at", "hole_frame.origin", "hole_frame.axis",
+                    "mount.position", "mount.aim"}  # fmt: skip
 """Fields where a negative number is a valid value (positions, angles, directions)."""
 
 BASE_HOLE = {

@@ -62,7 +62,7 @@ def test_a_profile_names_a_mount_or_describes_its_own(tmp_path):
         ),
         (
             {"name": "peg_view", "position": [0.1, 0, 0], "aim": [0, 0, 0.2], "source": "s"},
-            "mount.name",
+            "mount.position",
             "named mount",
         ),
         ({"name": "x", "height": 3}, "mount.height", "unknown key"),

@@ -42,15 +42,22 @@ class Mount:
         T[2, 3] -= PEG_LENGTH
         return T
 
-    def check(self) -> str | None:
-        """What is wrong with the geometry, or None."""
-        if np.linalg.norm(np.subtract(self.aim, self.position)) < 1e-3:
-            return "aim must be at least 1 mm from position"
+    def check(self) -> tuple[str, str] | None:
+        """(field, what is wrong) with the geometry, or None."""
+        for field in ("position", "aim"):
+            v = np.asarray(getattr(self, field), dtype=float)
+            if not np.all(np.isfinite(v)) or np.abs(v).max() > MAX_REACH:
+                return field, f"expected finite metres within {MAX_REACH} m of the flange"
         x = np.subtract(self.aim, self.position)
+        if np.linalg.norm(x) < 1e-3:
+            return "aim", "expected at least 1 mm from position"
         if abs(x[1]) > 0.99 * np.linalg.norm(x):
-            return "the optical axis must not run along the tool's y axis"
+            return "aim", "the optical axis must not run along the tool's y axis"
         return None
 
+
+MAX_REACH = 0.5
+"""A camera bracket on a flange holds the camera within this distance of it (m)."""
 
 MOUNTS = {
     m.name: m

@@ -180,27 +180,31 @@ class CameraMount:
 
     def resolve(self, path: Path | str = "<profile>") -> Mount:
         """The mount this section names or describes; errors name the field."""
-        if self.position is None and self.aim is None:
-            if self.name not in MOUNTS:
+        own = [k for k in ("position", "aim", "source") if getattr(self, k)]
+        if self.name in MOUNTS:
+            if own:
                 raise SensorProfileError(
                     path,
-                    "mount.name",
-                    f"one of {', '.join(MOUNTS)} (or give position, aim and source), "
-                    f"got {self.name!r}",
+                    f"mount.{own[0]}",
+                    f"{self.name!r} is a named mount with its own "
+                    "geometry; give yours another name",
                 )
             return MOUNTS[self.name]
+        if not own:
+            raise SensorProfileError(
+                path,
+                "mount.name",
+                f"one of {', '.join(MOUNTS)}, or a mount of your own with position, aim and "
+                f"source; got {self.name!r}",
+            )
         for k in ("position", "aim", "source"):
             if not getattr(self, k):
                 raise SensorProfileError(
-                    path, f"mount.{k}", "a mount of its own needs position, aim and source"
+                    path, f"mount.{k}", "a mount of your own needs position, aim and source"
                 )
-        if self.name in MOUNTS:
-            raise SensorProfileError(
-                path, "mount.name", f"{self.name!r} is a named mount; call this one otherwise"
-            )
         mount = Mount(self.name, self.position, self.aim, self.source)
         if problem := mount.check():
-            raise SensorProfileError(path, "mount.aim", problem)
+            raise SensorProfileError(path, f"mount.{problem[0]}", problem[1])
         return mount
 
 

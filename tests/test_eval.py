@@ -338,6 +338,22 @@ def test_report_videos_replay_the_recorded_episodes(reference, tmp_path):
     }
 
 
+def test_a_rendered_video_is_kept_only_for_the_episode_it_shows(tmp_path):
+    """A video's file name says task, agent and outcome; what it shows is the episode of
+    one job, seed and code: a re-run with other code or another seed renders it anew."""
+    from cfvs_maniskill.report.videos import IDENTITY, _kept, episode_identity
+
+    rec = {"key": "T|cfvs|box|small|0", "seed": 7, "provenance": {"code_fingerprint": "ab"}}
+    video, meta = tmp_path / "v.mp4", tmp_path / "v.txt"
+    video.write_bytes(b"mp4")
+    meta.write_text(f"failure peg on the rim\n{IDENTITY}{episode_identity(rec)}\n")
+    assert _kept(video, meta, rec) == (False, "peg on the rim")
+    assert _kept(video, meta, {**rec, "seed": 8}) is None
+    assert _kept(video, meta, {**rec, "provenance": {"code_fingerprint": "cd"}}) is None
+    meta.write_text("success \n")  # a video that does not say which episode it shows
+    assert _kept(video, meta, rec) is None
+
+
 def test_every_record_says_which_code_weights_sensor_task_and_object_made_it(reference):
     from cfvs_maniskill.constants import PROJECT_ROOT
     from cfvs_maniskill.provenance import code_version, sha256

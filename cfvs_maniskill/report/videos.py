@@ -52,6 +52,27 @@ def video_name(rec: dict) -> str:
     return f"{rec['task']}_{rec['label']}_{outcome}" + ("" if sensor == "ideal" else f"_{sensor}")
 
 
+IDENTITY = "episode: "
+
+
+def episode_identity(rec: dict) -> str:
+    """What makes a record's episode: its job, seed and the episode code that ran it."""
+    code = (rec.get("provenance") or {}).get("code_fingerprint", "")
+    return f"{rec.get('key', '')} seed {rec['seed']} code {code}"
+
+
+def _kept(path: Path, meta: Path, rec: dict) -> tuple[bool, str] | None:
+    """(replayed success, reason) of a video already rendered of this very episode; None
+    when there is none, or the file is of another episode (another seed, job or code)."""
+    if not (path.is_file() and meta.is_file()):
+        return None
+    first, _, rest = meta.read_text().partition("\n")
+    if rest.strip() != IDENTITY + episode_identity(rec):
+        return None
+    ok, _, reason = first.partition(" ")
+    return ok == "success", reason.strip()
+
+
 def render(
     picks: list[dict],
     out: Path,
@@ -59,8 +80,8 @@ def render(
     search_radius: float = DEFAULT_SEARCH_RADIUS,
 ) -> list[Video]:
     """Replay each picked episode, filmed (`rendering/film.py`, as `run --video`), into
-    OUT/<name>.mp4; files already there are kept (a second report run renders nothing
-    again)."""
+    OUT/<name>.mp4; a file already there of the same episode is kept (a second report run
+    renders nothing again), one of another episode or code rendered anew."""
     from tqdm import tqdm
 
     from cfvs_maniskill.envs.lookup import sensor_of_record, task_of_record
@@ -77,9 +98,9 @@ def render(
     for rec in tqdm(picks, desc="videos", unit="video"):
         path = out / f"{video_name(rec)}.mp4"
         meta = path.with_suffix(".txt")
-        if path.is_file() and meta.is_file():
-            ok, _, reason = meta.read_text().partition(" ")
-            videos.append(Video(rec, path, ok == "success", reason.strip()))
+        kept = _kept(path, meta, rec)
+        if kept is not None:
+            videos.append(Video(rec, path, *kept))
             continue
         sensor = rec.get("sensor", "ideal")
         try:
@@ -109,7 +130,8 @@ def render(
             videos.append(Video(rec, None, False, f"not rendered: {e}"))
             continue
         film.write(path)
-        meta.write_text(f"{'success' if r.success else 'failure'} {r.reason}\n")
+        outcome = "success" if r.success else "failure"
+        meta.write_text(f"{outcome} {r.reason}\n{IDENTITY}{episode_identity(rec)}\n")
         videos.append(Video(rec, path, r.success, r.reason))
     for env in envs.values():
         env.close()

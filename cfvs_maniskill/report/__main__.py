@@ -21,7 +21,7 @@ class ReportArgs:
     """Output folder."""
     videos: bool = True
     """Render the first success and first failure per agent and task into OUT/videos
-    (replayed from their records; files already there are kept)."""
+    (replayed from their records; a file of the same episode is kept)."""
     video_variants: bool = False
     """Also film the variants (ablations, other weights, no-search runs, other sensor
     profiles); by default each agent's own records under the ideal sensor only (a video costs about

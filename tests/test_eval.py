@@ -354,6 +354,27 @@ def test_a_rendered_video_is_kept_only_for_the_episode_it_shows(tmp_path):
     assert _kept(video, meta, rec) is None
 
 
+def test_videos_of_episodes_no_longer_picked_leave_the_report(tmp_path):
+    from cfvs_maniskill.report.videos import prune, video_name
+
+    rec = {"task": "PegInsert3DoF", "label": "cfvs", "success": True}
+    shown = video_name(rec)
+    for stem in (shown, "PegInsert3DoF_cfvs_failure", "PegInsert6DoF_old_agent_success"):
+        (tmp_path / f"{stem}.mp4").write_bytes(b"mp4")
+        (tmp_path / f"{stem}.txt").write_text("success\n")
+    (tmp_path / "notes.md").write_text("not a film")
+    gone = prune(tmp_path, {shown})
+    assert sorted(f.name for f in gone) == [
+        "PegInsert3DoF_cfvs_failure.mp4", "PegInsert3DoF_cfvs_failure.txt",
+        "PegInsert6DoF_old_agent_success.mp4", "PegInsert6DoF_old_agent_success.txt",
+    ]  # fmt: skip
+    assert sorted(f.name for f in tmp_path.iterdir()) == [
+        f"{shown}.mp4",
+        f"{shown}.txt",
+        "notes.md",
+    ]
+
+
 def test_every_record_says_which_code_weights_sensor_task_and_object_made_it(reference):
     from cfvs_maniskill.constants import PROJECT_ROOT
     from cfvs_maniskill.provenance import code_version, sha256

@@ -135,7 +135,22 @@ def render(
         videos.append(Video(rec, path, r.success, r.reason))
     for env in envs.values():
         env.close()
+    for gone in prune(out, {video_name(r) for r in picks}):
+        tqdm.write(f"{gone.name}: removed (no longer among the episodes shown)")
     return videos
+
+
+FILM_SUFFIXES = (".mp4", ".txt")
+"""A video and the note of the episode it shows."""
+
+
+def prune(out: Path, shown: set[str]) -> list[Path]:
+    """Remove the videos in `out` (and their notes) whose name is not in `shown`: films of
+    episodes the records no longer pick would sit beside the report as if it showed them."""
+    gone = [f for f in sorted(out.iterdir()) if f.suffix in FILM_SUFFIXES and f.stem not in shown]
+    for f in gone:
+        f.unlink()
+    return gone
 
 
 def markdown(videos: list[Video], base: Path) -> str:

@@ -158,3 +158,25 @@ def test_the_env_puts_the_camera_on_the_profiles_mount_and_renders_it_unbiased(m
     face = (np.abs(p[:, 1]) < h - 0.004) & (p[:, 2] > -0.05) & (np.abs(p[:, 0] - h) < 0.004)
     assert face.sum() > 1000
     assert abs(np.median(p[face, 0]) - h) < 0.0002
+
+
+def test_training_samples_see_the_cloud_moved_onto_the_peg_as_the_agent_does():
+    """The collector reads a view as the agent does (`seen_object_points`): the camera's
+    error, measured on the peg's points, is taken out of the object points it keeps."""
+    from types import SimpleNamespace
+
+    import torch
+
+    from cfvs_maniskill.policies.cfvs.collect import seen_object_points
+
+    rng = np.random.default_rng(3)
+    tcp = G.make(np.diag([1.0, -1.0, -1.0]), [0.4, 0.1, 0.3])  # tool pointing down
+    peg = _square_peg_faces(rng, 800)
+    part = rng.uniform([-0.03, -0.03, 0.025], [0.03, 0.03, 0.035], (3000, 3))  # ahead of the tip
+    E = tcp @ G.make(np.eye(3), [0.0015, -0.001, 0.0]) @ G.inv(tcp)  # the camera's error
+    world = _move(E, _move(tcp, np.concatenate([peg, part])))
+    xyzw = np.concatenate([world, np.ones((len(world), 1))], axis=1)[None].astype(np.float32)
+    obs = {"pointcloud": {"xyzw": torch.from_numpy(xyzw)}}
+    kept = seen_object_points(SimpleNamespace(peg="square", peg_chamfer=0.0), obs, tcp)
+    assert len(kept) == len(part)
+    assert np.abs(np.sort(kept, axis=0) - np.sort(part, axis=0)).max() < 2e-4

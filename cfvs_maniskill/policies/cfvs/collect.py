@@ -19,10 +19,13 @@ from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.perception.clouds import (
     MIN_OBJECT_POINTS,
     fine_crop,
-    object_points,
     sample_fixed,
+    valid_world_points,
+    world_object_points,
     world_to_tool,
 )
+from cfvs_maniskill.perception.peg import apply as apply_correction
+from cfvs_maniskill.perception.peg import peg_correction
 from cfvs_maniskill.policies.dataset import SampleKind
 
 
@@ -49,6 +52,15 @@ def fine_start(u, H: np.ndarray, rng, max_translation: float, constrain=None, tr
     return None
 
 
+def seen_object_points(task, obs, tcp: np.ndarray) -> np.ndarray:
+    """Tool-frame object points of a view as the agent reads them: the cloud moved onto the
+    peg it shows (`peg_calibration`; a camera that does not see the peg leaves it as it is),
+    then the table and the peg dropped. Fitted on each view: a sample has only its own."""
+    world = valid_world_points(obs["pointcloud"]["xyzw"][0].numpy())
+    fix = peg_correction(world, tcp, task.peg, task.peg_chamfer)
+    return world_object_points(apply_correction(fix, world, tcp), tcp, task.peg)
+
+
 def _common(u, points, tcp, H, i):
     return {
         "points": points.astype(np.float32),
@@ -61,7 +73,7 @@ def _common(u, points, tcp, H, i):
 
 def _coarse(args, task, u, obs, H, rng, i):
     tcp = u.tcp_matrix()
-    pts = object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, task.peg)
+    pts = seen_object_points(task, obs, tcp)
     if len(pts) < MIN_OBJECT_POINTS:
         return None  # the camera hardly sees the object: redraw
     pts = sample_fixed(pts, args.points, rng)
@@ -84,7 +96,7 @@ def _fine(args, task, u, obs, H, rng, i):
     obs = u.get_obs()
     tcp = u.tcp_matrix()  # what the robot really reached (IK is exact to < 1 mm)
     target = u.insertion_pose(-PRE_INSERT_HEIGHT, H, tcp)
-    pts = fine_crop(object_points(obs["pointcloud"]["xyzw"][0].numpy(), tcp, task.peg))
+    pts = fine_crop(seen_object_points(task, obs, tcp))
     if len(pts) < MIN_OBJECT_POINTS:
         return None  # the crop sees (almost) nothing: not a useful sample
     pts = sample_fixed(pts, args.points, rng)

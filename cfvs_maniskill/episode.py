@@ -212,7 +212,7 @@ def run_episode(
         wall_time_s=round(time.perf_counter() - t0, 3),
         sensor=u.sensor_profile.name,
         mount=u.camera_mount.name,
-        provenance=provenance.of_episode(env, getattr(agent, "weights", {})),
+        provenance=provenance.of_episode(env, getattr(agent, "weights", {}), agent),
         move_residuals=residuals,
         agent_error=None if failure is None else failure.to_json(),
     )

@@ -7,6 +7,7 @@ from __future__ import annotations
 import ast
 import functools
 import hashlib
+import inspect
 import subprocess
 from collections.abc import Iterable
 from contextlib import contextmanager
@@ -169,14 +170,27 @@ def note_loaded(path: Path | str) -> None:
             loaded.update(entry)
 
 
-def of_episode(env, weights: dict[str, str]) -> dict:
-    """The provenance of an episode on `env` by an agent that loaded `weights`."""
+def agent_code(agent) -> dict[str, str]:
+    """{file: sha256} of the module defining `agent`'s class when it lives outside this
+    package (your own agent, `module:Class`): the fingerprint covers only the package."""
+    try:
+        source = inspect.getsourcefile(type(agent))
+    except TypeError:  # a class without a source file (built in, made at run time)
+        return {}
+    if source is None or Path(source).resolve().is_relative_to(PACKAGE_DIR.resolve()):
+        return {}
+    return files_entry(source)
+
+
+def of_episode(env, weights: dict[str, str], agent=None) -> dict:
+    """The provenance of an episode on `env` by `agent`, which loaded `weights`."""
     u = env.unwrapped
     spec = u.object_specs[u.object_index]
     object_files = [spec.source, *([spec.mesh_file] if spec.mesh_file else [])]
     return {
         "code": code_version(),
         "code_fingerprint": code_fingerprint(),
+        "agent_code": agent_code(agent),
         "weights": dict(sorted(weights.items())),
         "sensor": {"name": u.sensor_profile.name, **_one(u.sensor_profile.source)},
         "task": {"name": u.task.name, **_one(u.task.source)},

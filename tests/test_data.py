@@ -490,3 +490,19 @@ def test_grooved_family_cuts_grooves_beside_the_hole_and_is_held_out(tmp_path, m
     assert "grooved" not in TRAINING_FAMILIES
     with pytest.raises(ValueError, match="held out of training"):
         procedural_specs(2, 1, "square", 0.004, 0.045, "grooved")
+
+
+def test_a_dataset_can_be_collected_on_another_mount_than_the_profiles():
+    """`--mount NAME` puts the camera on a named mount for every scene of the file (KOVIS's
+    own mount given way to), and the file says so (a resume must match it)."""
+    from cfvs_maniskill import resources
+    from cfvs_maniskill.data.collect import CollectArgs, Collector, file_attrs
+    from cfvs_maniskill.envs.task_config import load_task
+
+    task = load_task(resources.bundled("tasks") / "PegInsert6DoF.yaml")
+    for kind in ("fine", "kovis"):
+        args = CollectArgs(kind=kind, mount="flange_side")
+        assert Collector(args, task).env_kwargs()["camera_mount"] == "flange_side"
+        assert file_attrs(args, task)["mount"] == "flange_side"
+    assert "camera_mount" not in Collector(CollectArgs(kind="fine"), task).env_kwargs()
+    assert "mount" not in file_attrs(CollectArgs(kind="fine"), task)

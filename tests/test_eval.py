@@ -550,6 +550,19 @@ def test_your_own_agent_runs_through_eval_by_module_and_class(tmp_path):
     by_agent = {a: [x for x in rows if x["agent"] == a] for a in (mine, "oracle")}
     assert len(by_agent[mine]) == 2 and len(by_agent["oracle"]) == 2
     assert {x["seed"] for x in by_agent[mine]} == {x["seed"] for x in by_agent["oracle"]}
+    # Its module is outside the package's fingerprint: the record keeps its own hash.
+    from cfvs_maniskill.report.trace import stale_reasons
+
+    rec = by_agent[mine][0]
+    from cfvs_maniskill.constants import PROJECT_ROOT
+    from cfvs_maniskill.provenance import sha256
+
+    mine_file = "examples/top_face_agent.py"
+    assert rec["provenance"]["agent_code"] == {mine_file: sha256(PROJECT_ROOT / mine_file)}
+    assert by_agent["oracle"][0]["provenance"]["agent_code"] == {}
+    assert not any("agent code" in x for x in stale_reasons(rec, rec["provenance"]))
+    edited = {**rec["provenance"], "agent_code": {mine_file: "0" * 64}}
+    assert f"agent code {mine_file} changed since" in stale_reasons(rec, edited)
     assert any(x["steps"] > 0 for x in by_agent[mine])  # it moved the robot
     for spec, says in [
         ("nosuch_pkg.mod:Agent", "cannot import module 'nosuch_pkg.mod'"),
@@ -685,3 +698,19 @@ def test_the_readme_gets_a_table_for_the_other_cameras_where_it_has_its_markers(
     assert "| 3DoF d435 | 3DoF textured |" in second
     assert "| cfvs | 0.00 / 0.00 | 1.00 / 1.00 | - / - |" in second
     assert fill_headlines(main, recs, "README.md").count("| cfvs |") == 1
+
+
+def test_an_agent_on_another_mount_than_the_rest_is_named_with_it():
+    """KOVIS's networks learnt one mount's images and run on it (`env_options`): the
+    README's table says so beside its name; agents on the usual mount get no note."""
+    from cfvs_maniskill.report.tables import table_headline
+
+    recs = [
+        {"label": a, "task": "PegInsert3DoF", "sensor": "ideal", "init": i, "success": True,
+         "mount": m}
+        for a, m in (("cfvs", "tip_view"), ("icp", "tip_view"), ("kovis", "flange_side"))
+        for i in ("small", "large")
+    ]  # fmt: skip
+    text = table_headline(recs)
+    assert "| cfvs | 1.00 / 1.00 |" in text and "| icp | 1.00 / 1.00 |" in text
+    assert "| kovis (flange_side mount) | 1.00 / 1.00 |" in text

@@ -73,6 +73,9 @@ class CollectArgs:
     sensor: str = "ideal"
     """Sensor profile the observations are taken with (sensors/<name>.yaml or a path): train
     on the noise the agent will meet."""
+    mount: str | None = None
+    """A named camera mount (robots/mounts.py) in place of the profile's: views of another
+    mount (e.g. flange_side) to train on beside the profile's own."""
     rollout_step: tuple[float, float] = ROLLOUT_STEP
     """kovis: range of a rollout's step, m (log-uniform); e.g. 0.02 0.08 for far views only."""
 
@@ -101,6 +104,8 @@ def file_attrs(args: CollectArgs, task) -> dict:
         attrs["procedural_parts"] = True
     if drawn not in ("plain", "features", "parts"):
         attrs["procedural_family"] = drawn
+    if args.mount is not None:
+        attrs["mount"] = args.mount
     attrs.update(sample_kinds()[args.kind].attrs(args))
     return attrs
 
@@ -165,6 +170,11 @@ class Collector:
         self.env = None
         self.group = -1
 
+    def env_kwargs(self) -> dict:
+        """What the kind needs of the camera, on `--mount` when given."""
+        mount = {} if self.args.mount is None else {"camera_mount": self.args.mount}
+        return {**self.kind.env_kwargs, **mount}
+
     def _env_for(self, group: int):
         import gymnasium as gym
 
@@ -177,7 +187,7 @@ class Collector:
             self.env = gym.make(
                 env_id,
                 **task_kwargs,
-                **self.kind.env_kwargs,
+                **self.env_kwargs(),
                 objects=tuple(self.groups[group]),
                 assets=tuple(self.assets),
                 sensor=self.args.sensor,

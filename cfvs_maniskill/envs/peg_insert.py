@@ -26,7 +26,7 @@ from cfvs_maniskill.robots.kinematics import ArmKinematics, body_pose
 from cfvs_maniskill.robots.poses import flange_pose, insertion_pose
 from cfvs_maniskill.robots.ur5 import CAMERA_FOV, STEREO_UIDS, TCP_LINK, TOOL_LINK, robot_uid_for
 from cfvs_maniskill.sensing.model import SensorModel
-from cfvs_maniskill.sensing.profile import load_profile
+from cfvs_maniskill.sensing.profile import load_profile, with_mount
 from cfvs_maniskill.sensing.wrench import contact_wrench
 from cfvs_maniskill.sensing.wrist import WristSensing, camera_geometry
 
@@ -83,6 +83,7 @@ class PegInsertEnv(BaseEnv):
         num_envs: int = 1,
         stereo: bool = False,
         task_file: str | None = None,
+        camera_mount: str | None = None,
         **kwargs,
     ):
         if task_file is not None:  # this env's task is the file's, whatever the id's
@@ -98,8 +99,10 @@ class PegInsertEnv(BaseEnv):
         """True: the wrist camera also delivers its stereo imagers' lit views (`STEREO_UIDS`;
         the right one the sensor profile's `imager.stereo_baseline` from the left)."""
         self.init_error_m = start_distance(cfg, init_error)
-        self.sensor_profile = load_profile(sensor)
-        """The sensor profile (`sensors/<name>.yaml`): depth camera, hand-eye, wrench."""
+        self.sensor_profile = with_mount(load_profile(sensor), camera_mount)
+        """The sensor profile (`sensors/<name>.yaml`): depth camera, hand-eye, wrench; its
+        mount replaced by `camera_mount` (a named one) for an agent trained on that
+        mount's views (its `env_options`)."""
         self.depth_noise_std = depth_noise(cfg, self.sensor_profile, depth_noise_std)
         self.sensing = SensorModel(self.sensor_profile, self.depth_noise_std)
         self.camera_mount = self.sensor_profile.camera_mount

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections import defaultdict
+from collections import Counter, defaultdict
 
 from cfvs_maniskill.report import paper
 from cfvs_maniskill.stats import wilson_interval
@@ -237,10 +237,15 @@ def table_headline(records: list[dict], sensors: tuple[str, ...] = HEADLINES["he
     README's tables; everything else is in the report)."""
     head = " | ".join(f"{t[len('PegInsert') :]} {s}" for t in HEADLINE_TASKS for s in sensors)
     out = [f"| agent | {head} |", "|---|" + "---|" * len(HEADLINE_TASKS) * len(sensors)]
+    shown = [r for r in records if r["sensor"] in sensors]
+    usual = Counter(r.get("mount") for r in shown).most_common(1)
     for label in HEADLINE_AGENTS:
-        recs = [r for r in records if r["label"] == label and r["sensor"] in sensors]
+        recs = [r for r in shown if r["label"] == label]
         if not recs:
             continue
+        mounts = {r.get("mount") for r in recs}
+        if mounts != {usual[0][0]}:  # an agent trained for another mount runs on it: say so
+            label = f"{label} ({', '.join(sorted(map(str, mounts)))} mount)"
         cells = []
         for t in HEADLINE_TASKS:
             for s in sensors:

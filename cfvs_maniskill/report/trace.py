@@ -116,6 +116,7 @@ def signature(p: dict) -> tuple:
     object's files may differ: a cell averages over objects)."""
     return (
         p.get("code_fingerprint") or p.get("code"),
+        json.dumps(p.get("agent_code"), sort_keys=True),
         json.dumps(p.get("weights"), sort_keys=True),
         (p.get("sensor") or {}).get("sha256"),
         (p.get("task") or {}).get("sha256"),
@@ -125,6 +126,8 @@ def signature(p: dict) -> tuple:
 def _today(file: str) -> str | None:
     """sha256 of a recorded file as it is today (None: gone)."""
     path = Path(file) if Path(file).is_absolute() else resources.bundled_file(file)
+    if not path.is_file() and not Path(file).is_absolute():
+        path = PROJECT_ROOT / file  # a file of the checkout outside the bundle
     return sha256(path) if path.is_file() else None
 
 
@@ -164,6 +167,9 @@ def stale_reasons(rec: dict, p: dict) -> list[str]:
     for file, sha in ((p.get("object") or {}).get("files") or {}).items():
         if _today(file) != sha:
             out.append(f"hole file {file} changed since")
+    for file, sha in (p.get("agent_code") or {}).items():
+        if _today(file) != sha:
+            out.append(f"agent code {file} changed since")
     if p.get("weights") is None:
         out.append("weights unknown")
     else:

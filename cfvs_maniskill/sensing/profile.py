@@ -7,6 +7,7 @@ name them."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Literal
@@ -231,6 +232,15 @@ class SensorProfile:
     @property
     def camera_mount(self) -> Mount:
         return self.mount.resolve(self.source or self.name)
+
+
+def with_mount(profile: SensorProfile, mount: str | None) -> SensorProfile:
+    """`profile` with the named mount `mount` in place of its own (None: as it is)."""
+    if mount is None:
+        return profile
+    section = CameraMount(name=mount)
+    section.resolve("the env's camera_mount")  # an unknown name: an error naming mount.name
+    return dataclasses.replace(profile, mount=section)
 
 
 _SECTIONS = ("depth", "hand_eye", "wrench", "imager", "surfaces", "mount")

@@ -53,10 +53,15 @@ class KOVISAgentConfig:
     takes 15 at the longest move."""
 
 
+MOUNT = "flange_side"
+"""KOVIS's networks learn the images of one camera mount (agents/kovis/ on this one): its
+data are collected there and it runs there, whatever mount the sensor profile names."""
+
+
 class KOVISAgent(Agent):
     name = "kovis"
     obs_mode = "rgbd"
-    env_options = {"stereo": True}  # noqa: RUF012
+    env_options = {"stereo": True, "camera_mount": MOUNT}  # noqa: RUF012
 
     def __init__(self, task: TaskSpec, cfg: KOVISAgentConfig | None = None):
         self.task = task

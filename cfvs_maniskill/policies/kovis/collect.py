@@ -17,6 +17,7 @@ from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
 from cfvs_maniskill.perception import labels as L
 from cfvs_maniskill.policies.dataset import SampleKind
+from cfvs_maniskill.policies.kovis.agent import MOUNT
 from cfvs_maniskill.policies.kovis.model import KOVISConfig
 
 ROLLOUT_FRAMES = 5
@@ -164,7 +165,7 @@ def _attrs(args) -> dict:
 KINDS = {
     "kovis": SampleKind(
         # The stereo imagers, and segmentation for the decoder's targets.
-        {"obs_mode": "rgb+depth+segmentation", "stereo": True},
+        {"obs_mode": "rgb+depth+segmentation", "stereo": True, "camera_mount": MOUNT},
         True,
         _rollout,
         check=_check,

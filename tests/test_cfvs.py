@@ -201,13 +201,15 @@ def test_agent_gives_up_with_a_reason_when_it_sees_nothing(make_env):
     assert a.kind == "give_up" and "OPN" in a.reason
 
 
-def test_a_blind_fine_look_turns_the_wrist_to_each_other_yaw_then_gives_up(make_env):
-    """A fine look that sees nothing: the same pre-insertion pose at each other yaw of the
-    square (90 deg apart, the camera on another side), then a give-up; 3-DoF keeps its yaw
-    and the `no_turn` ablation gives up at once."""
+def test_a_blind_fine_look_looks_again_from_further_back_then_from_each_other_yaw(make_env):
+    """A fine look that sees nothing: the same estimate from RISE further back, then from
+    there at each other yaw of the square (90 deg apart, the camera on another side), then
+    a give-up; 3-DoF keeps its yaw (it only steps back) and the `no_look_again` ablation
+    gives up at once."""
     from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
     from cfvs_maniskill.envs.task_config import load_task
     from cfvs_maniskill.policies.base import Observation
+    from cfvs_maniskill.policies.cfvs.agent import RISE
     from cfvs_maniskill.policies.cfvs.config import ablation_config
     from cfvs_maniskill.policies.interface import insertion_pose
 
@@ -227,15 +229,18 @@ def test_a_blind_fine_look_turns_the_wrist_to_each_other_yaw_then_gives_up(make_
         assert a.kind == "give_up" and "nothing seen" in a.reason
         return poses
 
-    poses = blind_looks(TaskSpec.of(env.unwrapped.task))
-    assert len(poses) == 4  # the first yaw and three turns
-    for i, P in enumerate(poses):
-        assert np.allclose(P[:3, 3], poses[0][:3, 3]) and np.allclose(P[:3, 2], poses[0][:3, 2])
+    first, back, *turns = blind_looks(TaskSpec.of(env.unwrapped.task))
+    assert len(turns) == 3
+    assert np.allclose(back[:3, :3], first[:3, :3], atol=1e-6)
+    assert np.allclose(back[:3, 3], first[:3, 3] - RISE * first[:3, 2], atol=1e-6)
+    for i, P in enumerate(turns):
+        assert np.allclose(P[:3, 3], back[:3, 3]) and np.allclose(P[:3, 2], back[:3, 2])
         assert all(abs(P[:3, 0] @ Q[:3, 0]) < 1e-6 or P[:3, 0] @ Q[:3, 0] < -0.99
-                   for Q in poses[:i])  # fmt: skip
-    assert len(blind_looks(TaskSpec.of(env.unwrapped.task), ablation_config("no_turn"))) == 1
+                   for Q in [back, *turns[:i]])  # fmt: skip
+    no_again = ablation_config("no_look_again")
+    assert len(blind_looks(TaskSpec.of(env.unwrapped.task), no_again)) == 1
     three = TaskSpec.of(load_task(resources.bundled("tasks") / "PegInsert3DoF.yaml"))
-    assert len(blind_looks(three)) == 1
+    assert len(blind_looks(three)) == 2
 
 
 @pytest.mark.slow
@@ -373,3 +378,28 @@ def test_pointnet_grouping_takes_each_clouds_own_points():
     assert out.shape == (3, 7, 4, 2)
     for b in range(3):
         assert torch.equal(out[b], x[b][idx[b]])
+
+
+def test_after_looking_from_further_back_the_peg_goes_down_to_the_pre_insertion_pose_first(
+    make_env,
+):
+    """The insertion starts PRE_INSERT_HEIGHT from the opening: an agent servoing from
+    further back (`look_again`) moves down to the pre-insertion pose before inserting."""
+    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+    from cfvs_maniskill.policies.base import Observation
+    from cfvs_maniskill.policies.cfvs.agent import RISE
+    from cfvs_maniskill.policies.interface import insertion_pose
+
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")
+    env.reset(seed=3)
+    H = env.unwrapped.hole_pose
+    agent = CFVSAgent(TaskSpec.of(env.unwrapped.task))
+    agent.reset(0)
+    agent.stage, agent.estimate, agent.rise = "insert", H, RISE
+    pre = insertion_pose("square", H, -PRE_INSERT_HEIGHT, env.unwrapped.tcp_matrix())
+    back = pre.copy()
+    back[:3, 3] -= RISE * pre[:3, 2]
+    empty = {"pointcloud": {"xyzw": torch.zeros(1, 64, 4)}}
+    down = agent.act(Observation(empty, back))
+    assert down.kind == "move" and np.allclose(down.pose, pre, atol=1e-6)
+    assert agent.act(Observation(empty, down.pose)).kind == "insert"

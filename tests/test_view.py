@@ -109,7 +109,7 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
     6-DoF: at the yaw nearest the tool's the camera ends up behind the wall (the fine stage
     sees nothing, or, with the retrained square net, steers the arm into the wall); turned
     to a clear side the same scene inserts, whether the coarse view chose that side or the
-    blind fine look turned the wrist there (`turn_when_blind`)."""
+    blind fine look turned the wrist there (`look_again`)."""
     outcome = held_out_outcomes(
         make_env,
         "PegInsert6DoF-v1",
@@ -117,7 +117,7 @@ def test_beside_a_tall_wall_the_clear_approach_inserts_where_the_nearest_yaw_see
         "heldoutc_wall_bracket",
         203,
         {
-            "nearest": {"clear_view": False, "turn_when_blind": False},
+            "nearest": {"clear_view": False, "look_again": False},
             "turned": {"clear_view": False},
             "clear": {},
         },

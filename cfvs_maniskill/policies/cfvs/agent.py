@@ -52,7 +52,10 @@ from cfvs_maniskill.task_dof import constrain
 from cfvs_maniskill.validation import read_yaml
 
 MAX_TURNS = 3
-"""`turn_when_blind` tries each of the other three yaws of a square at most once."""
+"""`look_again` tries each of the other three yaws of a square at most once ..."""
+RISE = 0.02
+"""... after looking once from this much further back than the pre-insertion pose (m): the
+opening then 15 cm from the camera, beyond a D435's 12.7 cm minimum range."""
 
 
 def weights_for(
@@ -101,7 +104,8 @@ class CFVSAgent(Agent):
         files = weights_for(task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation)
         self.oakn, self.oakn_meta = load_weights(files["oakn"], "oakn", task.peg)
         self.opn, self.opn_meta = load_weights(files["opn"], ("opnv", "opn"), task.peg)
-        self.max_decisions = 2 + self.cfg.max_fine_iterations + MAX_TURNS
+        # the coarse move and the insertion, the fine loop, a step back and down, the turns
+        self.max_decisions = 2 + self.cfg.max_fine_iterations + 2 + MAX_TURNS
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
@@ -115,6 +119,7 @@ class CFVSAgent(Agent):
         self.peg_fix = None
         self.had_face = False  # whether any fine estimate had its face seen round it
         self.blind_x: list[np.ndarray] = []  # tool x axes whose fine look saw nothing
+        self.rise = 0.0  # how much further back than the pre-insertion pose it servoes
         self.phase, self.estimate = "", None
         # Point subsets are random; seeded per episode, so the same episode repeats exactly.
         self.rng = np.random.default_rng(seed)
@@ -220,25 +225,40 @@ class CFVSAgent(Agent):
         """The pre-insertion pose over hole frame `H`: at the yaw nearest the tool's own or,
         with `clear_view`, the nearest whose camera sees the opening past what stands on
         the face (`world`: the coarse view's object points)."""
-        nearest = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, tcp)
+        nearest = self.standoff(H, tcp)
         if not (self.cfg.clear_view and self.peg == "square" and self.task.dof != 3):
             return nearest  # a 3-DoF peg keeps its yaw (task_dof.constrain)
         poses = approach_yaws(nearest, tcp[:3, 0])
         i, _ = clear_view_yaw(world, poses, self.task.camera_in_tcp(), H)
         return poses[i]
 
-    def turn(self, tcp: np.ndarray) -> Action | None:
-        """`turn_when_blind`: the current estimate's pre-insertion pose at the least wrist
-        turn whose yaw is at least 45 deg from every yaw that saw nothing, or None."""
-        if not self.cfg.turn_when_blind or self.task.dof == 3 or self.estimate is None:
+    def look_again(self, tcp: np.ndarray) -> Action | None:
+        """`look_again`: a fine look saw nothing round the peg. First the current estimate's
+        pre-insertion pose RISE further back (the opening beyond the camera's minimum
+        range, over what stands near it), then, a square in 4/6-DoF, the least wrist turn
+        whose yaw is at least 45 deg from every yaw that saw nothing; None when all are
+        tried."""
+        if not self.cfg.look_again or self.estimate is None:
             return None
+        if self.rise == 0.0:
+            self.rise = RISE
+            self.phase = (
+                f"fine: nothing seen round the peg, looking again {RISE * 1000:.0f} mm back"
+            )
+            return Action.move(self.constrain(self.standoff(self.estimate, tcp), tcp))
+        if self.task.dof == 3:
+            return None  # a 3-DoF peg keeps its yaw (task_dof.constrain)
         self.blind_x.append(tcp[:3, 0].copy())
-        nearest = insertion_pose(self.peg, self.estimate, -PRE_INSERT_HEIGHT, tcp)
-        for pose in approach_yaws(nearest, tcp[:3, 0]):
+        for pose in approach_yaws(self.standoff(self.estimate, tcp), tcp[:3, 0]):
             if all(pose[:3, 0] @ x < np.cos(np.radians(45)) for x in self.blind_x):
                 self.phase = "fine: nothing seen round the peg, the wrist turned"
                 return Action.move(self.constrain(pose, tcp))
         return None
+
+    def standoff(self, H: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+        """The pose the fine stage servoes to over hole frame `H`: the pre-insertion pose,
+        `rise` further back once the camera saw nothing from there (`look_again`)."""
+        return insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT - self.rise, tcp)
 
     def constrain(self, T: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return constrain(self.task, T, ref)
@@ -278,24 +298,26 @@ class CFVSAgent(Agent):
             pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
             a = self.predict_offset(fine_crop(pts))
             if a is None:
-                turned = self.turn(tcp)
-                return turned or Action.give_up("OPN: nothing seen around the peg")
+                again = self.look_again(tcp)
+                return again or Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"
             if self.cfg.rim_plane:
                 a, source, face_seen = self.refine(a, pts, tcp)
                 if self.cfg.face_guard and face_seen is False and self.had_face:
                     self.stage = "insert"
                     self.phase = "fine: no face round OPN's new estimate, insert from the last"
-                    return Action.insert()
+                    return self.insert(tcp)
                 self.had_face = self.had_face or bool(face_seen)
             if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
                 a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
+            self.estimate = L.hole_frame_from_pre_insertion(L.apply_action(tcp, a))
+            if self.rise:  # servo to the standoff it looks from
+                a = L.fine_action(tcp, self.standoff(self.estimate, L.apply_action(tcp, a)))
             small = (
                 np.linalg.norm(a[:3]) < self.cfg.tol_translation
                 and np.degrees(np.linalg.norm(a[3:])) < self.cfg.tol_rotation_deg
             )
             target = L.apply_action(tcp, a)
-            self.estimate = L.hole_frame_from_pre_insertion(target)
             if not small:
                 self.fine_steps += 1
                 self.phase = f"fine iteration {self.fine_steps}: {source}"
@@ -305,4 +327,13 @@ class CFVSAgent(Agent):
                 self.phase = f"final correction: the last {source} below (e_t, e_r)"
                 return Action.move(target)
         self.phase = "insertion"
+        return self.insert(tcp)
+
+    def insert(self, tcp: np.ndarray) -> Action:
+        """Insert; from further back than the pre-insertion pose (`look_again`), first move
+        to it over the estimate (the insertion starts PRE_INSERT_HEIGHT from the opening)."""
+        if self.rise and self.estimate is not None:
+            self.rise, self.stage = 0.0, "insert"
+            self.phase = "down to the pre-insertion pose"
+            return Action.move(self.constrain(self.standoff(self.estimate, tcp), tcp))
         return Action.insert()

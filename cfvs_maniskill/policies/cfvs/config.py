@@ -79,12 +79,12 @@ class CFVSConfig:
     nearest the tool's own whose camera has a clear line of sight to the opening from the
     pre-insertion pose (perception/view.py; the coarse cloud says what stands over the
     face). False: always the nearest."""
-    turn_when_blind: bool = True
-    """4- and 6-DoF: when a fine look sees nothing round the peg (a wall between the camera
-    and the opening, or a step nearer than the camera's minimum range fills its view),
-    move to the same pre-insertion pose turned about the hole's axis, which puts the
-    camera on another side of the opening, up to three turns. False: give up there. A 3-DoF
-    peg keeps its yaw, so it gives up either way."""
+    look_again: bool = True
+    """When a fine look sees nothing round the peg (the opening nearer than the camera's
+    minimum range, a wall between the camera and the opening), look again from another
+    view of the same estimate: 2 cm further back, then (a square in 4/6-DoF) turned
+    about the hole's axis, which puts the camera on another side of the opening, up to
+    three turns. False: give up there."""
     table_calibration: bool = True
     """Correct the camera's depth scale and two of its mount angles once per episode, from
     the table plane in the coarse view, whose height the robot knows
@@ -117,7 +117,7 @@ class CFVSConfig:
 REQUIRES = {
     "rim_plane": "coarse_to_fine",
     "final_correction": "coarse_to_fine",
-    "turn_when_blind": "coarse_to_fine",
+    "look_again": "coarse_to_fine",
     "opening_fit": "rim_plane",
     "face_height": "rim_plane",
     "face_guard": "face_height",
@@ -142,7 +142,7 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     "wide_ring": ("rim_narrow_ring", "the rim fit on the 20 mm ring always"),
     "round_ring": ("rim_square_ring", "a round rim ring beyond a square opening's corners"),
     "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
-    "no_turn": ("turn_when_blind", "give up when a fine look sees nothing round the peg"),
+    "no_look_again": ("look_again", "give up when a fine look sees nothing round the peg"),
     "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
     "no_table_calibration": ("table_calibration", "the cloud as reported, not set by the table"),
     "no_peg_calibration": ("peg_calibration", "the cloud not moved onto the peg it shows"),

@@ -160,6 +160,28 @@ def test_the_env_puts_the_camera_on_the_profiles_mount_and_renders_it_unbiased(m
     assert abs(np.median(p[face, 0]) - h) < 0.0002
 
 
+def test_an_agent_trained_on_one_mount_runs_on_it_whatever_the_profile_says(make_env, tmp_path):
+    """`camera_mount` (an agent's env option) moves the camera to a named mount, in the
+    render and in what the agents are told; KOVIS collects and runs on the same one."""
+    from cfvs_maniskill.policies.kovis.agent import KOVISAgent
+    from cfvs_maniskill.policies.kovis.collect import KINDS
+
+    profile = _profile(tmp_path, "pv", mount="peg_view")
+    env = make_env(
+        "PegInsert3DoF-v1", obs_mode="pointcloud", sensor=profile, camera_mount="tip_view"
+    )
+    u = env.unwrapped
+    env.reset(seed=0)
+    assert TaskSpec.of_env(env).mount == MOUNTS["tip_view"]
+    gl = u.scene.sensors["wrist_camera"].get_params()["cam2world_gl"][0].numpy()
+    in_tool = G.inv(u.flange_matrix()) @ gl.astype(np.float64) @ G.inv(SAPIEN_CAM_TO_GL)
+    assert np.allclose(in_tool, MOUNTS["tip_view"].in_tool(), atol=1e-5)
+    mount = KOVISAgent.env_options["camera_mount"]
+    assert mount in MOUNTS and KINDS["kovis"].env_kwargs["camera_mount"] == mount
+    with pytest.raises(SensorProfileError, match="mount.name"):
+        make_env("PegInsert3DoF-v1", sensor=profile, camera_mount="no_such_mount")
+
+
 def test_training_samples_see_the_cloud_moved_onto_the_peg_as_the_agent_does():
     """The collector reads a view as the agent does (`seen_object_points`): the camera's
     error, measured on the peg's points, is taken out of the object points it keeps."""

@@ -71,6 +71,16 @@ MOUNTS = {
             "the view, so the cloud is placed by the hand-eye calibration alone",
         ),
         Mount(
+            "tip_view",
+            (0.11, 0.0, 0.05),
+            (0.0, 0.0, 0.17),
+            "flange_side's bracket pitched down: the optical axis meets the tool axis 7 cm "
+            "past the tip, so at the pre-insertion pose the tip is 23 deg and the opening "
+            "12 deg below the image's centre (the D405's vertical half field is 29 deg), "
+            "0.11 m and 0.13 m away; the peg's face towards the camera is in view from the "
+            "coarse view on, and the opening is seen beside the peg, not behind it",
+        ),
+        Mount(
             "peg_view",
             (0.075, 0.0, 0.02),
             (0.0, 0.0, 0.13),
@@ -83,4 +93,4 @@ MOUNTS = {
 }
 """Named mounts; a profile's `mount.name` picks one (or gives its own geometry)."""
 
-DEFAULT_MOUNT = "flange_side"
+DEFAULT_MOUNT = "tip_view"

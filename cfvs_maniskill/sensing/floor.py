@@ -206,7 +206,7 @@ def closed_loop_samples(
     """(n, 2) residuals (lateral m, tilt deg) of the closed-loop servo under a profile's
     mount and camera errors, drawn as `profile_floor_samples` draws them, with the tip, the
     peg's axis and the opening each measured from `points` points of that noise."""
-    C = camera_in_tip("peg_view") if camera is None else camera
+    C = camera_in_tip() if camera is None else camera
     he, d = profile.hand_eye, profile.depth
     rng = np.random.default_rng(seed)
     mounts = mount_errors(he.translation, he.rotation_deg, rng, n)

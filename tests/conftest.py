@@ -53,7 +53,14 @@ def quiet(stderr: str) -> bool:
 
 
 def held_out_outcomes(
-    make_env, env_id: str, folder: str, obj: str, seed: int, configs: dict, init_error=None
+    make_env,
+    env_id: str,
+    folder: str,
+    obj: str,
+    seed: int,
+    configs: dict,
+    init_error=None,
+    **env_kwargs,
 ) -> dict:
     """(success, reason, lateral mm off the pre-insertion pose after the agent's last move)
     of one scene on held-out object `obj` (from `assets/<folder>`) for each CFVS agent of
@@ -66,7 +73,7 @@ def held_out_outcomes(
     from cfvs_maniskill.policies.interface import TaskSpec
 
     assets = str(ROOT / "assets" / folder)
-    env = make_env(env_id, obs_mode="pointcloud", objects=(obj,), assets=(assets,))
+    env = make_env(env_id, obs_mode="pointcloud", objects=(obj,), assets=(assets,), **env_kwargs)
     if init_error is not None:
         env.unwrapped.init_error_m = env.unwrapped.task.init_error[init_error]
     ex = Executor(env)

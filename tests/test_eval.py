@@ -516,7 +516,7 @@ def test_eval_runs_a_grid_of_sensor_profiles(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     recs = [json.loads(x) for x in (tmp_path / "episodes.jsonl").read_text().splitlines()]
     assert sorted(x["sensor"] for x in recs) == ["ideal", "realistic"]
-    assert {x["mount"] for x in recs} == {"flange_side"}  # each record names its mount
+    assert {x["mount"] for x in recs} == {"tip_view"}  # each record names its mount
     assert len({x["seed"] for x in recs}) == 1 and len({x["key"] for x in recs}) == 2
     assert "| realistic |" in (tmp_path / "summary.md").read_text()
     r = run_cli(*args)

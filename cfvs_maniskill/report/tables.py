@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from collections import Counter, defaultdict
+from collections import defaultdict
 
 from cfvs_maniskill.report import paper
+from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT
 from cfvs_maniskill.stats import wilson_interval
 
 INITS = ("small", "large")
@@ -237,14 +238,13 @@ def table_headline(records: list[dict], sensors: tuple[str, ...] = HEADLINES["he
     README's tables; everything else is in the report)."""
     head = " | ".join(f"{t[len('PegInsert') :]} {s}" for t in HEADLINE_TASKS for s in sensors)
     out = [f"| agent | {head} |", "|---|" + "---|" * len(HEADLINE_TASKS) * len(sensors)]
-    shown = [r for r in records if r["sensor"] in sensors]
-    usual = Counter(r.get("mount") for r in shown).most_common(1)
+    shown = [r for r in records if r["sensor"] in sensors and r["task"] in HEADLINE_TASKS]
     for label in HEADLINE_AGENTS:
         recs = [r for r in shown if r["label"] == label]
         if not recs:
             continue
-        mounts = {r.get("mount") for r in recs}
-        if mounts != {usual[0][0]}:  # an agent trained for another mount runs on it: say so
+        mounts = {r.get("mount") or DEFAULT_MOUNT for r in recs}
+        if mounts != {DEFAULT_MOUNT}:  # an agent trained for another mount runs on it: say so
             label = f"{label} ({', '.join(sorted(map(str, mounts)))} mount)"
         cells = []
         for t in HEADLINE_TASKS:

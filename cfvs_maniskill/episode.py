@@ -59,6 +59,9 @@ class EpisodeResult:
     wall_penetration_m: float | None = None
     """... and how far its section reached past the hole's wall (negative: play left; None:
     no full section below the opening), the success test's inputs (scene.score)."""
+    decisions: list = field(default_factory=list)
+    """The agent's account of each decision, in order (its `phase`, else the action's kind):
+    which stage moved the peg and why, e.g. a second look from nearer."""
     agent_error: dict | None = None
     """What the agent did wrong, when the episode ended on it (AgentFailure.to_json)."""
 
@@ -151,6 +154,7 @@ def run_episode(
     reason = ""
     inserted = False
     residuals: list[list[float]] = []
+    decisions: list[str] = []
     try:
         if failure is not None:
             raise failure
@@ -160,8 +164,9 @@ def run_episode(
             except Exception as e:
                 raise AgentFailure.of(name, k + 1, e) from e
             action = checked_action(action, name, k + 1)
+            decisions.append(getattr(agent, "phase", "") or f"{action.kind} {k + 1}")
             if film is not None:
-                film.note(agent.phase or f"{action.kind} {k + 1}", agent.estimate)
+                film.note(decisions[-1], agent.estimate)
             if action.kind == "give_up":
                 reason = f"agent gave up: {action.reason}"
                 break
@@ -214,5 +219,6 @@ def run_episode(
         mount=u.camera_mount.name,
         provenance=provenance.of_episode(env, getattr(agent, "weights", {}), agent),
         move_residuals=residuals,
+        decisions=decisions,
         agent_error=None if failure is None else failure.to_json(),
     )

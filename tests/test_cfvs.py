@@ -243,6 +243,40 @@ def test_a_blind_fine_look_looks_again_from_further_back_then_from_each_other_ya
     assert len(blind_looks(three)) == 2
 
 
+def test_a_coarse_estimate_from_far_is_looked_at_again_from_nearer(make_env):
+    """From 30 cm OAKN's estimate is taken again from NEAR_VIEW: the peg moves onto the
+    line from the estimate to its tip, aimed at it; the second look goes on to the
+    pre-insertion pose whatever the distance, as does a look from 15 cm; `no_look_again`
+    makes one coarse look."""
+    from cfvs_maniskill.episode import observe
+    from cfvs_maniskill.policies.cfvs.agent import NEAR_VIEW
+    from cfvs_maniskill.policies.cfvs.config import ablation_config
+
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud", init_error="large")
+    obs, _ = env.reset(seed=3)
+    spec = TaskSpec.of(env.unwrapped.task)
+    agent = CFVSAgent(spec)
+    agent.reset(0)
+    tcp = observe(env, obs).tcp_pose
+    a = agent.act(observe(env, obs))
+    H = agent.estimate
+    assert a.kind == "move" and agent.stage == "coarse" and "looking again" in agent.phase
+    to_hole = H[:3, 3] - a.pose[:3, 3]
+    assert np.isclose(np.linalg.norm(to_hole), NEAR_VIEW)
+    assert np.allclose(a.pose[:3, 2], to_hole / NEAR_VIEW, atol=1e-6)
+    assert np.allclose(np.cross(to_hole, tcp[:3, 3] - H[:3, 3]), 0.0, atol=1e-9)
+    agent.coarse_looks += 1  # as the second look's act counts itself
+    assert agent.nearer_view(H, tcp) is None  # one second look at most
+    near = CFVSAgent(spec)
+    near.reset(0)
+    near.coarse_looks = 1
+    assert near.nearer_view(H, a.pose) is None
+    once = CFVSAgent(spec, ablation_config("no_look_again"))
+    once.reset(0)
+    once.act(observe(env, obs))
+    assert once.stage == "fine" and "looking again" not in once.phase
+
+
 @pytest.mark.slow
 def test_same_seed_same_cfvs_episodes_across_processes(tmp_path):
     import json

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import PRE_INSERT_HEIGHT, hole_half_extent
 from cfvs_maniskill.nets.checkpoint import WeightsTableError
 from cfvs_maniskill.perception import labels as L
@@ -51,8 +52,14 @@ from cfvs_maniskill.policies.networks import load_weights
 from cfvs_maniskill.task_dof import constrain
 from cfvs_maniskill.validation import read_yaml
 
+NEAR_VIEW = 0.15
+"""`look_again`: OAKN's estimate from further than FAR_VIEW is taken again from this far
+from it (m), the peg aimed at it: there the opening is within 15 deg of the image's centre,
+where from 30 cm it can sit at the view's edge, half the part cut off ..."""
+FAR_VIEW = 0.2
+"""... (m)."""
 MAX_TURNS = 3
-"""`look_again` tries each of the other three yaws of a square at most once ..."""
+"""... and a fine look that sees nothing tries each of the other three yaws of a square at most once ..."""
 RISE = 0.02
 """... after looking once from this much further back than the pre-insertion pose (m): the
 opening then 15 cm from the camera, beyond a D435's 12.7 cm minimum range."""
@@ -104,8 +111,8 @@ class CFVSAgent(Agent):
         files = weights_for(task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation)
         self.oakn, self.oakn_meta = load_weights(files["oakn"], "oakn", task.peg)
         self.opn, self.opn_meta = load_weights(files["opn"], ("opnv", "opn"), task.peg)
-        # the coarse move and the insertion, the fine loop, a step back and down, the turns
-        self.max_decisions = 2 + self.cfg.max_fine_iterations + 2 + MAX_TURNS
+        # the coarse moves and the insertion, the fine loop, a step back and down, the turns
+        self.max_decisions = 3 + self.cfg.max_fine_iterations + 2 + MAX_TURNS
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
@@ -115,6 +122,7 @@ class CFVSAgent(Agent):
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
+        self.coarse_looks = 0
         self.correction = IDENTITY  # the camera's errors change with the episode
         self.peg_fix = None
         self.had_face = False  # whether any fine estimate had its face seen round it
@@ -232,6 +240,19 @@ class CFVSAgent(Agent):
         i, _ = clear_view_yaw(world, poses, self.task.camera_in_tcp(), H)
         return poses[i]
 
+    def nearer_view(self, H: np.ndarray, tcp: np.ndarray) -> Action | None:
+        """`look_again`, coarse: OAKN's first estimate `H`, made from further than FAR_VIEW,
+        is looked at again from NEAR_VIEW, on the line from it to the peg's tip and with
+        the peg aimed at it; None to go on (near enough, or looked twice)."""
+        away = tcp[:3, 3] - H[:3, 3]
+        far = np.linalg.norm(away)
+        if not self.cfg.look_again or self.coarse_looks > 1 or far <= FAR_VIEW:
+            return None
+        R = G.frame_with_z(-away / far, tcp[:3, 0])
+        view = G.make(R, H[:3, 3] + NEAR_VIEW * away / far)
+        self.phase = f"coarse: estimate from {far * 100:.0f} cm, looking again from nearer"
+        return Action.move(self.constrain(view, tcp))
+
     def look_again(self, tcp: np.ndarray) -> Action | None:
         """`look_again`: a fine look saw nothing round the peg. First the current estimate's
         pre-insertion pose RISE further back (the opening beyond the camera's minimum
@@ -289,8 +310,14 @@ class CFVSAgent(Agent):
             pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
             H = self.estimate_hole(pts, tcp)
             if H is None or not np.all(np.isfinite(H)):
-                return Action.give_up("OAKN: the camera sees no hole object")
-            self.phase, self.estimate = "coarse: OAKN keypoints -> hole frame", H
+                if self.estimate is None:
+                    return Action.give_up("OAKN: the camera sees no hole object")
+                H = self.estimate  # the nearer look saw nothing: the first estimate stands
+            self.coarse_looks += 1
+            self.estimate = H
+            if (view := self.nearer_view(H, tcp)) is not None:
+                return view
+            self.phase = "coarse: OAKN keypoints -> hole frame"
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
             pose = self.approach(H, tool_to_world(pts, tcp), tcp)
             return Action.move(self.constrain(pose, tcp))

@@ -80,7 +80,9 @@ class CFVSConfig:
     pre-insertion pose (perception/view.py; the coarse cloud says what stands over the
     face). False: always the nearest."""
     look_again: bool = True
-    """When a fine look sees nothing round the peg (the opening nearer than the camera's
+    """Look again from a better view where one look cannot be trusted: OAKN's estimate made
+    from further than 20 cm is taken again from 15 cm (agent.NEAR_VIEW), and when a fine
+    look sees nothing round the peg (the opening nearer than the camera's
     minimum range, a wall between the camera and the opening), look again from another
     view of the same estimate: 2 cm further back, then (a square in 4/6-DoF) turned
     about the hole's axis, which puts the camera on another side of the opening, up to
@@ -142,7 +144,7 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     "wide_ring": ("rim_narrow_ring", "the rim fit on the 20 mm ring always"),
     "round_ring": ("rim_square_ring", "a round rim ring beyond a square opening's corners"),
     "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
-    "no_look_again": ("look_again", "give up when a fine look sees nothing round the peg"),
+    "no_look_again": ("look_again", "one coarse look; give up when a fine look sees nothing"),
     "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
     "no_table_calibration": ("table_calibration", "the cloud as reported, not set by the table"),
     "no_peg_calibration": ("peg_calibration", "the cloud not moved onto the peg it shows"),

@@ -2,7 +2,7 @@
 
     .venv/bin/python assets/heldout_c/make_meshes.py
 
-Written after the rim fit's parallel-planes check (session 16), to test it on shapes it
+Written after the rim fit's parallel-planes check, to test it on shapes it
 was not developed on: surfaces parallel to the hole's face beside the opening (fins, rails,
 a second boss level), a wall, an inclined chamfer. Metres, bottom at z = 0."""
 

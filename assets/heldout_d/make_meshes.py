@@ -2,7 +2,7 @@
 
     .venv/bin/python assets/heldout_d/make_meshes.py
 
-Written after every change to the rim fit in session 16 (the parallel-planes check, the
+Written after the changes to the rim fit (the parallel-planes check, the
 ring that follows a square opening), before any episode on them: the clean check of those
 changes. Metres, bottom at z = 0."""
 

@@ -2,7 +2,7 @@
 
     .venv/bin/python assets/heldout_e/make_meshes.py
 
-Written at the start of session 17, before the change that session made (the convex parts
+Written before the change (the convex parts
 clipped out of the hole's clearance) and before any episode on them: the clean check of
 it. Shape families no earlier set has: a cross, gussets, a counterbore, a tilted top face,
 a channel. Metres, bottom at z = 0."""

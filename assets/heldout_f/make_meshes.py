@@ -2,7 +2,7 @@
 
     .venv/bin/python assets/heldout_f/make_meshes.py
 
-Written at the start of session 18, before that session's change (the approach yaw chosen
+Written before the change (the approach yaw chosen
 for a clear view) and before any episode on them: the clean check of it. Tall things
 beside the hole, in directions no earlier set has (two walls in a corner, a post, a deep
 slot, a tower off the diagonal) and a ledge stepping up beside the opening. Metres, bottom

@@ -2,7 +2,7 @@
 
     .venv/bin/python assets/heldout_g/make_meshes.py
 
-Written in session 19 before any episode on them and before that session's change was
+Written before any episode on them and before the change was
 committed: its clean check. Faces and surroundings no earlier set has: the hole in a raised
 round boss barely wider than the opening, along a narrow bar, inside an annular groove, beside
 a 45 deg bevelled edge, and among four smaller distractor holes. Metres, bottom at z = 0;

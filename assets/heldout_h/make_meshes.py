@@ -2,7 +2,7 @@
 
     .venv/bin/python assets/heldout_h/make_meshes.py
 
-Written in session 19 before any episode on them and before that session's second change
+Written before any episode on them and before the change
 was committed: its clean check. Other surfaces beside the opening at other levels and other
 openings: a second square hole of the same size 3.5 cm away, tiers stepping up on one
 side and down on the other, a rib across at 30 deg, a sunken floor inside a frame, two

@@ -2,7 +2,7 @@
 
     .venv/bin/python assets/heldout_i/make_meshes.py
 
-Written in session 20 before any episode on them and before that session's change to the
+Written before any episode on them and before the change to the
 tight-fit tasks' contact generation was committed: its clean check. Bodies and entries a
 machined part has that no earlier set has: a hexagonal prism and a round disc with the hole
 off-centre near their edge, a cross-shaped body whose re-entrant corners are 1 cm from the

@@ -42,7 +42,8 @@ MAX_CORRECTION = (0.01, 5.0)
 MIN_FACE_SHARE = 0.1
 """A face holding fewer points than this share of the face best in view is left out of the
 fit: seen edge-on, its few points are the edge's, and the noise biases which face each of
-them is given to (1 mm of noise made a 1 mm, 0.5 deg fit from a peg seen without error)."""
+them is given to (1 mm of noise made a fit that moved the cloud 1 mm from a peg seen
+without error)."""
 ITERATIONS = 12
 DAMPING = 1e-6
 """Per point, added to each diagonal entry of the normal equations: far below what any

@@ -59,7 +59,8 @@ where from 30 cm it can sit at the view's edge, half the part cut off ..."""
 FAR_VIEW = 0.2
 """... (m)."""
 MAX_TURNS = 3
-"""... and a fine look that sees nothing tries each of the other three yaws of a square at most once ..."""
+"""... and a fine look that sees nothing tries each of the other three yaws of a square at
+most once ..."""
 RISE = 0.02
 """... after looking once from this much further back than the pre-insertion pose (m): the
 opening then 15 cm from the camera, beyond a D435's 12.7 cm minimum range."""

@@ -243,9 +243,9 @@ def table_headline(records: list[dict], sensors: tuple[str, ...] = HEADLINES["he
         recs = [r for r in shown if r["label"] == label]
         if not recs:
             continue
-        mounts = {r.get("mount") or DEFAULT_MOUNT for r in recs}
+        mounts = {r["mount"] for r in recs}  # load.py names the mount of older records
         if mounts != {DEFAULT_MOUNT}:  # an agent trained for another mount runs on it: say so
-            label = f"{label} ({', '.join(sorted(map(str, mounts)))} mount)"
+            label = f"{label} ({', '.join(sorted(mounts))} mount)"
         cells = []
         for t in HEADLINE_TASKS:
             for s in sensors:

@@ -53,14 +53,15 @@ from cfvs_maniskill.task_dof import constrain
 from cfvs_maniskill.validation import read_yaml
 
 NEAR_VIEW = 0.15
-"""`look_again`: OAKN's estimate from further than FAR_VIEW is taken again from this far
-from it (m), the peg aimed at it: there the opening is within 15 deg of the image's centre,
-where from 30 cm it can sit at the view's edge, half the part cut off ..."""
+"""`look_again`: an OAKN estimate made from further than FAR_VIEW is taken again from this
+far from it (m), the peg aimed at it: from there the opening is within 15 deg of the image's
+centre."""
 FAR_VIEW = 0.2
-"""... (m)."""
+"""From further than this (m), e.g. 30 cm, the opening can sit at the view's edge with part
+of the body cut off."""
 MAX_TURNS = 3
-"""... and a fine look that sees nothing tries each of the other three yaws of a square at
-most once ..."""
+"""`look_again`: a fine look that sees nothing tries each of the other three yaws of a
+square at most once ..."""
 RISE = 0.02
 """... after looking once from this much further back than the pre-insertion pose (m): the
 opening then 15 cm from the camera, beyond a D435's 12.7 cm minimum range."""

@@ -12,7 +12,9 @@ cloud stays as reported.
 The fit is point-to-plane ICP against the planes that bound the peg (robots/peg.py), damped
 so that what the points do not show stays put: the turn about a round peg's axis, and the
 move along the axis when the tip's end face is out of view (neither moves the opening ahead
-of the tip sideways). Faces seen edge-on are left out (MIN_FACE_SHARE).
+of the tip sideways). Faces seen edge-on are left out (MIN_FACE_SHARE); a side face seen
+whole is then placed between its drawn edges (`centre_across`): its plane alone does not
+say where along it the peg is.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from scipy.spatial.transform import Rotation
 from cfvs_maniskill import geometry as G
 from cfvs_maniskill.constants import peg_half_extent
 from cfvs_maniskill.perception.clouds import world_to_tool
-from cfvs_maniskill.robots.peg import peg_planes
+from cfvs_maniskill.robots.peg import peg_face_spans, peg_planes
 
 REACH = 0.06
 """Peg points within this length of the tip (tcp frame) are fitted: the part of the peg
@@ -44,6 +46,9 @@ MIN_FACE_SHARE = 0.1
 fit: seen edge-on, its few points are the edge's, and the noise biases which face each of
 them is given to (1 mm of noise made a fit that moved the cloud 1 mm from a peg seen
 without error)."""
+MIN_SPAN_SEEN = 0.8
+"""A side face's seen points must span this share of its drawn width (both edges in view)
+for the face to be placed across the peg."""
 ITERATIONS = 12
 DAMPING = 1e-6
 """Per point, added to each diagonal entry of the normal equations: far below what any
@@ -74,7 +79,8 @@ def peg_correction(
         r = signed[np.arange(len(q)), face]
         keep = np.abs(r) <= band
         count = np.bincount(face[keep], minlength=len(n))
-        keep &= count[face] >= MIN_FACE_SHARE * count.max()
+        fitted = count >= MIN_FACE_SHARE * count.max()
+        keep &= fitted[face]
         if keep.sum() < MIN_PEG_POINTS:
             return None
         q, r, nf = q[keep], r[keep], n[face[keep]]
@@ -87,10 +93,46 @@ def peg_correction(
         band = max(INLIER_SIGMAS * sigma, MIN_INLIER_BAND)
         if np.linalg.norm(step[3:]) < 1e-6 and np.linalg.norm(step[:3]) < 1e-5:
             break
+    T = centre_across(p, T, n, d, peg_face_spans(peg, chamfer), band, fitted)
     move, turn = np.linalg.norm(T[:3, 3]), np.degrees(Rotation.from_matrix(T[:3, :3]).magnitude())
     if move > MAX_CORRECTION[0] or turn > MAX_CORRECTION[1]:
         return None
     return T
+
+
+def centre_across(
+    p: np.ndarray,
+    T: np.ndarray,
+    n: np.ndarray,
+    d: np.ndarray,
+    spans: np.ndarray,
+    band: float,
+    fitted: np.ndarray,
+) -> np.ndarray:
+    """`T` moved across the side face with most points within `band` of it, so that the
+    points within `band` of its plane sit midway between the face's drawn edges (`spans`).
+    From `tip_view` the peg shows one face whole and its neighbours edge-on (left out of the
+    fit): the plane fit then leaves the move along the face at zero, and the hand-eye error
+    that way with it; the face's edges show it. Unchanged when a `fitted` face already holds
+    that direction, the face is narrower than a few bands (a round peg's facets) or its
+    points do not reach both edges (MIN_SPAN_SEEN)."""
+    q = p @ T[:3, :3].T + T[:3, 3]
+    signed = q @ n.T - d
+    face = np.argmax(signed, axis=1)
+    on = np.abs(signed[np.arange(len(q)), face]) <= band
+    count = np.bincount(face[on], minlength=len(n)) * (np.abs(n[:, 2]) < 0.1)  # side faces
+    f = int(np.argmax(count))
+    width = spans[f, 1] - spans[f, 0]
+    if count[f] < MIN_PEG_POINTS or width < 4 * band:
+        return T
+    # By the plane, not by the nearest face: past a drawn edge, a point is still this face's.
+    t = np.cross([0.0, 0.0, 1.0], n[f])
+    if np.any(fitted & (np.abs(n @ t) > 0.5)):
+        return T
+    lo, hi = np.percentile(q[np.abs(signed[:, f]) <= band] @ t, [1, 99])  # robust to strays
+    if hi - lo < MIN_SPAN_SEEN * width:
+        return T
+    return G.make(np.eye(3), (spans[f].mean() - 0.5 * (lo + hi)) * t) @ T
 
 
 def apply(T: np.ndarray | None, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:

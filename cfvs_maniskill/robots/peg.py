@@ -43,3 +43,17 @@ def peg_planes(profile: str, chamfer: float = 0.0) -> tuple[np.ndarray, np.ndarr
     key = np.round(np.c_[n, d], 9)  # a hull's faces come in coplanar pairs: one plane each
     _, first = np.unique(key, axis=0, return_index=True)
     return n[np.sort(first)], d[np.sort(first)]
+
+
+@lru_cache(maxsize=8)
+def peg_face_spans(profile: str, chamfer: float = 0.0) -> np.ndarray:
+    """(K, 2): for each plane of `peg_planes`, where its face starts and ends across the
+    peg's axis, along z x normal (tcp frame); (0, 0) for the end faces."""
+    mesh = chamfered_peg_mesh(profile, chamfer)
+    v = np.asarray(mesh.vertices, dtype=np.float64) - [0.0, 0.0, PEG_LENGTH]
+    n, d = peg_planes(profile, chamfer)
+    spans = np.zeros((len(n), 2))
+    for k in range(len(n)):
+        across = v[np.abs(v @ n[k] - d[k]) < 1e-9] @ np.cross([0.0, 0.0, 1.0], n[k])
+        spans[k] = across.min(), across.max()
+    return spans

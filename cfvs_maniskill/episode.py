@@ -14,12 +14,11 @@ from cfvs_maniskill import provenance
 from cfvs_maniskill.constants import (
     INSERT_OVERSHOOT,
     PRE_INSERT_HEIGHT,
-    SUCCESS_TILT_MARGIN_DEG,
     SUCCESS_TIP_TOLERANCE,
     SUCCESS_WALL_PENETRATION,
 )
 from cfvs_maniskill.control.executor import Executor
-from cfvs_maniskill.envs.scene import max_tilt_deg
+from cfvs_maniskill.envs.scene import success_tilt_deg
 from cfvs_maniskill.policies.base import Agent, AgentFailure, Observation, checked_action
 from cfvs_maniskill.policies.interface import robot_view
 
@@ -43,9 +42,9 @@ class EpisodeResult:
     tip_to_bottom_m: float
     lateral_offset_m: float
     wall_time_s: float
-    sensor: str = "ideal"
+    sensor: str
     """The sensor profile the episode ran under ..."""
-    mount: str = "flange_side"
+    mount: str
     """... and the wrist camera's mount on the tool (its `mount`, robots/mounts.py)."""
     provenance: dict = field(default_factory=dict)
     """Which code, weights, sensor profile, task and object files made it (provenance.py)."""
@@ -81,7 +80,7 @@ def agent_seed(episode_seed: int) -> int:
 
 def failure_reason(m: dict, tilt_limit_deg: float) -> str:
     """Why a finished insertion is not a success, from the env's evaluate() metrics and the
-    task's tilt limit (scene.max_tilt_deg plus its margin)."""
+    task's tilt limit (scene.success_tilt_deg)."""
     deep = m["tip_depth"] >= 0.005
     if m["tilt_error_deg"] > (tilt_limit_deg if deep else max(tilt_limit_deg, 10.0)):
         return f"peg tilted {m['tilt_error_deg']:.1f} deg from the hole axis"
@@ -164,7 +163,7 @@ def run_episode(
             except Exception as e:
                 raise AgentFailure.of(name, k + 1, e) from e
             action = checked_action(action, name, k + 1)
-            decisions.append(getattr(agent, "phase", "") or f"{action.kind} {k + 1}")
+            decisions.append(agent.phase or f"{action.kind} {k + 1}")
             if film is not None:
                 film.note(decisions[-1], agent.estimate)
             if action.kind == "give_up":
@@ -191,7 +190,7 @@ def run_episode(
     m = {k: float(v[0]) for k, v in u.evaluate().items()}
     success = bool(m["success"]) and inserted
     if not success and not reason:
-        reason = failure_reason(m, max_tilt_deg(u.task) + SUCCESS_TILT_MARGIN_DEG)
+        reason = failure_reason(m, success_tilt_deg(u.task))
     if film is not None:
         executor.on_step = None
         film.finish(executor.servo_time, "success" if success else f"failure: {reason}")
@@ -217,7 +216,7 @@ def run_episode(
         wall_time_s=round(time.perf_counter() - t0, 3),
         sensor=u.sensor_profile.name,
         mount=u.camera_mount.name,
-        provenance=provenance.of_episode(env, getattr(agent, "weights", {}), agent),
+        provenance=provenance.of_episode(env, agent.weights, agent),
         move_residuals=residuals,
         decisions=decisions,
         agent_error=None if failure is None else failure.to_json(),

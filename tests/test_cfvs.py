@@ -265,12 +265,9 @@ def test_a_coarse_estimate_from_far_is_looked_at_again_from_nearer(make_env):
     assert np.isclose(np.linalg.norm(to_hole), NEAR_VIEW)
     assert np.allclose(a.pose[:3, 2], to_hole / NEAR_VIEW, atol=1e-6)
     assert np.allclose(np.cross(to_hole, tcp[:3, 3] - H[:3, 3]), 0.0, atol=1e-9)
-    agent.coarse_looks += 1  # as the second look's act counts itself
-    assert agent.nearer_view(H, tcp) is None  # one second look at most
-    near = CFVSAgent(spec)
-    near.reset(0)
-    near.coarse_looks = 1
-    assert near.nearer_view(H, a.pose) is None
+    agent.act(observe(env, obs))  # the second look, though from as far: one at most
+    assert agent.stage == "fine" and "looking again" not in agent.phase
+    assert CFVSAgent(spec).nearer_view(H, a.pose) is None  # from NEAR_VIEW: near enough
     once = CFVSAgent(spec, ablation_config("no_look_again"))
     once.reset(0)
     once.act(observe(env, obs))

@@ -110,6 +110,11 @@ def max_tilt_deg(cfg: TaskConfig) -> float:
     return float(np.degrees(np.arctan2(cfg.clearance, cfg.hole_depth)))
 
 
+def success_tilt_deg(cfg: TaskConfig) -> float:
+    """The tilt a success may have: `max_tilt_deg` and a margin."""
+    return max_tilt_deg(cfg) + SUCCESS_TILT_MARGIN_DEG
+
+
 def score(cfg: TaskConfig, tip_in_hole: np.ndarray) -> dict[str, float | bool]:
     """The task's success test on the peg tip's pose in the hole frame: the tip within the
     tolerance of the bottom, the peg's section inside the hole's walls (with the measured
@@ -124,7 +129,7 @@ def score(cfg: TaskConfig, tip_in_hole: np.ndarray) -> dict[str, float | bool]:
     success = (
         abs(tip_to_bottom) <= SUCCESS_TIP_TOLERANCE
         and penetration <= SUCCESS_WALL_PENETRATION
-        and tilt <= max_tilt_deg(cfg) + SUCCESS_TILT_MARGIN_DEG
+        and tilt <= success_tilt_deg(cfg)
     )
     return dict(
         success=bool(success and finite),

@@ -145,13 +145,18 @@ def world_object_points(
         world = world[table.height(world) > table.margin]
     p = world_to_tool(world, tcp)
     p = p[np.linalg.norm(p, axis=1) <= MAX_RANGE]
-    half = peg_half_extent(peg) + PEG_MARGIN
+    return p[~near_peg(p, peg, PEG_MARGIN)]
+
+
+def near_peg(p: np.ndarray, peg: str, margin: float, length: float = PEG_LENGTH) -> np.ndarray:
+    """Mask of the tool-frame points `p` within `margin` of the peg's volume, of its last
+    `length` before the tip."""
+    half = peg_half_extent(peg) + margin
     if peg == "round":
         across = np.hypot(p[:, 0], p[:, 1]) <= half
     else:
         across = (np.abs(p[:, 0]) <= half) & (np.abs(p[:, 1]) <= half)
-    on_peg = across & (p[:, 2] >= -PEG_LENGTH - PEG_MARGIN) & (p[:, 2] <= PEG_MARGIN)
-    return p[~on_peg]
+    return across & (p[:, 2] >= -length - margin) & (p[:, 2] <= margin)
 
 
 def fine_crop(points: np.ndarray) -> np.ndarray:

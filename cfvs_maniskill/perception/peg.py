@@ -23,8 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.constants import peg_half_extent
-from cfvs_maniskill.perception.clouds import world_to_tool
+from cfvs_maniskill.perception.clouds import near_peg, world_to_tool
 from cfvs_maniskill.robots.peg import peg_face_spans, peg_planes
 
 REACH = 0.06
@@ -64,10 +63,7 @@ def peg_correction(
     (`apply`): fitted once where nothing stands near the peg, no part is taken for it."""
     p = world_to_tool(world, tcp).astype(np.float64)
     n, d = peg_planes(peg, chamfer)
-    half = peg_half_extent(peg) + SEARCH_MARGIN
-    near = (np.abs(p[:, 0]) <= half) & (np.abs(p[:, 1]) <= half)
-    near &= (p[:, 2] >= -REACH) & (p[:, 2] <= SEARCH_MARGIN)
-    p = p[near]
+    p = p[near_peg(p, peg, SEARCH_MARGIN, REACH - SEARCH_MARGIN)]
     if len(p) < MIN_PEG_POINTS:
         return None
     T = np.eye(4)  # seen tcp-frame points -> where the arm holds them

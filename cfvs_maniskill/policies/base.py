@@ -61,7 +61,8 @@ class Agent(abc.ABC):
     weights: dict[str, str] = {}  # noqa: RUF012  (replaced per agent by make_agent)
     """The weights files the agent loaded -> their sha256 (records' provenance)."""
     phase: str = ""
-    """For videos' captions only: what the last `act` did (e.g. "coarse (OAKN)")."""
+    """What the last `act` did (e.g. "coarse (OAKN)"): the record's `decisions` and the
+    videos' captions."""
     estimate: np.ndarray | None = None
     """For videos only: the agent's current estimate of the hole frame (4x4, world; origin
     at the opening's centre, z out of the hole), drawn into the wrist view; None: none."""

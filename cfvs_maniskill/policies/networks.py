@@ -39,7 +39,7 @@ def load_weights(path: Path | str, net: str | tuple[str, ...], peg: str | None =
     try:
         model.load_state_dict(blob["state_dict"])
     except RuntimeError as e:
-        kinds = " or ".join((net,) if isinstance(net, str) else net)
-        raise WeightsError(f"{path}: weights do not fit the {kinds} architecture: {e}") from e
+        kind = blob["net"]  # one `read_weights` accepted
+        raise WeightsError(f"{path}: weights do not fit the {kind} architecture: {e}") from e
     model.eval()
     return model, blob

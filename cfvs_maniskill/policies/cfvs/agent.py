@@ -124,7 +124,6 @@ class CFVSAgent(Agent):
 
     def reset(self, seed: int) -> None:
         self.stage, self.fine_steps = "coarse", 0
-        self.coarse_looks = 0
         self.correction = IDENTITY  # the camera's errors change with the episode
         self.peg_fix = None
         self.had_face = False  # whether any fine estimate had its face seen round it
@@ -245,10 +244,10 @@ class CFVSAgent(Agent):
     def nearer_view(self, H: np.ndarray, tcp: np.ndarray) -> Action | None:
         """`look_again`, coarse: OAKN's first estimate `H`, made from further than FAR_VIEW,
         is looked at again from NEAR_VIEW, on the line from it to the peg's tip and with
-        the peg aimed at it; None to go on (near enough, or looked twice)."""
+        the peg aimed at it; None to go on (near enough)."""
         away = tcp[:3, 3] - H[:3, 3]
         far = np.linalg.norm(away)
-        if not self.cfg.look_again or self.coarse_looks > 1 or far <= FAR_VIEW:
+        if not self.cfg.look_again or far <= FAR_VIEW:
             return None
         R = G.frame_with_z(-away / far, tcp[:3, 0])
         view = G.make(R, H[:3, 3] + NEAR_VIEW * away / far)
@@ -311,13 +310,13 @@ class CFVSAgent(Agent):
         if self.stage == "coarse":
             pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
             H = self.estimate_hole(pts, tcp)
+            first = self.estimate is None  # the coarse stage looks twice at most
             if H is None or not np.all(np.isfinite(H)):
-                if self.estimate is None:
+                if first:
                     return Action.give_up("OAKN: the camera sees no hole object")
                 H = self.estimate  # the nearer look saw nothing: the first estimate stands
-            self.coarse_looks += 1
             self.estimate = H
-            if (view := self.nearer_view(H, tcp)) is not None:
+            if first and (view := self.nearer_view(H, tcp)) is not None:
                 return view
             self.phase = "coarse: OAKN keypoints -> hole frame"
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
@@ -337,16 +336,15 @@ class CFVSAgent(Agent):
                     self.phase = "fine: no face round OPN's new estimate, insert from the last"
                     return self.insert(tcp)
                 self.had_face = self.had_face or bool(face_seen)
-            if self.task.dof != 6:  # measure the remaining offset in the allowed DoF only
-                a = L.fine_action(tcp, self.constrain(L.apply_action(tcp, a), tcp))
-            self.estimate = L.hole_frame_from_pre_insertion(L.apply_action(tcp, a))
-            if self.rise:  # servo to the standoff it looks from
-                a = L.fine_action(tcp, self.standoff(self.estimate, L.apply_action(tcp, a)))
+            # the remaining offset in the allowed DoF only
+            pre = self.constrain(L.apply_action(tcp, a), tcp)  # the pre-insertion pose
+            self.estimate = L.hole_frame_from_pre_insertion(pre)
+            target = self.standoff(self.estimate, pre) if self.rise else pre
+            a = L.fine_action(tcp, target)
             small = (
                 np.linalg.norm(a[:3]) < self.cfg.tol_translation
                 and np.degrees(np.linalg.norm(a[3:])) < self.cfg.tol_rotation_deg
             )
-            target = L.apply_action(tcp, a)
             if not small:
                 self.fine_steps += 1
                 self.phase = f"fine iteration {self.fine_steps}: {source}"

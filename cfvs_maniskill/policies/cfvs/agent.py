@@ -46,7 +46,7 @@ from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_fro
 from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
 from cfvs_maniskill.policies.base import Action, Agent, Observation
 from cfvs_maniskill.policies.cfvs.config import CFVSConfig
-from cfvs_maniskill.policies.cfvs.oakn import weighted_keypoints
+from cfvs_maniskill.policies.cfvs.oakn import keypoint_spread, weighted_keypoints
 from cfvs_maniskill.policies.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.policies.networks import load_weights
 from cfvs_maniskill.task_dof import constrain
@@ -130,22 +130,32 @@ class CFVSAgent(Agent):
         self.blind_x: list[np.ndarray] = []  # tool x axes whose fine look saw nothing
         self.rise = 0.0  # how much further back than the pre-insertion pose it servoes
         self.phase, self.estimate = "", None
+        self.spread = np.inf  # of OAKN's candidates for the estimate (`coarse_look`)
         # Point subsets are random; seeded per episode, so the same episode repeats exactly.
         self.rng = np.random.default_rng(seed)
 
     # ------------------------------------------------------------------ perception
-    @torch.no_grad()
     def estimate_hole(self, pts: np.ndarray, tcp: np.ndarray) -> np.ndarray | None:
         """OAKN + Algorithm 1: the hole's world frame from one wrist view's tool-frame object
         points `pts` (`object_points`), or None."""
+        found = self.coarse_look(pts, tcp)
+        return None if found is None else found[0]
+
+    @torch.no_grad()
+    def coarse_look(self, pts: np.ndarray, tcp: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """`estimate_hole` and the spread of OAKN's candidates for the opening (metres,
+        `keypoint_spread`), or None."""
         if len(pts) < MIN_OBJECT_POINTS:
             return None
         x = torch.from_numpy(sample_fixed(pts, int(self.oakn_meta["points"]), self.rng))[None]
         offsets, logits = self.oakn(x)
         w = torch.sigmoid(logits) if self.cfg.confidence_map else None
-        k, _ = weighted_keypoints(x, offsets, w)
+        k, cand = weighted_keypoints(x, offsets, w)
         k_world = tool_to_world(k[0].numpy().astype(np.float64), tcp)
-        return L.hole_frame_from_keypoints(k_world.astype(np.float64))
+        H = L.hole_frame_from_keypoints(k_world.astype(np.float64))
+        if not np.all(np.isfinite(H)):
+            return None
+        return H, float(keypoint_spread(cand, k, w)[0])
 
     @torch.no_grad()
     def predict_offset(self, pts: np.ndarray) -> np.ndarray | None:
@@ -309,16 +319,21 @@ class CFVSAgent(Agent):
         xyzw = observation.obs["pointcloud"]["xyzw"][0].cpu().numpy()
         if self.stage == "coarse":
             pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
-            H = self.estimate_hole(pts, tcp)
+            found = self.coarse_look(pts, tcp)
             first = self.estimate is None  # the coarse stage looks twice at most
-            if H is None or not np.all(np.isfinite(H)):
-                if first:
-                    return Action.give_up("OAKN: the camera sees no hole object")
-                H = self.estimate  # the nearer look saw nothing: the first estimate stands
-            self.estimate = H
+            if found is None and first:
+                return Action.give_up("OAKN: the camera sees no hole object")
+            # Of two looks, the one OAKN is surer of: from nearer, walls beside the opening
+            # can fill the view and pull its candidates apart.
+            took = found is not None and (first or found[1] < self.spread)
+            if took:
+                self.estimate, self.spread = found
+            H = self.estimate
             if first and (view := self.nearer_view(H, tcp)) is not None:
                 return view
             self.phase = "coarse: OAKN keypoints -> hole frame"
+            if not took:
+                self.phase += ", the first look's (its candidates closer together)"
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
             pose = self.approach(H, tool_to_world(pts, tcp), tcp)
             return Action.move(self.constrain(pose, tcp))

@@ -66,6 +66,16 @@ def weighted_keypoints(
     return (cand * w[:, :, None, None]).sum(dim=1), cand
 
 
+def keypoint_spread(cand: Tensor, keypoints: Tensor, weights: Tensor | None) -> Tensor:
+    """(B,) how far the first keypoint's candidates (the opening's centre) lie from it, RMS,
+    weighted as the keypoint was: OAKN's own uncertainty about the opening."""
+    d2 = ((cand[:, :, 0] - keypoints[:, None, 0]) ** 2).sum(dim=-1)  # (B, N)
+    if weights is None:
+        return d2.mean(dim=1).sqrt()
+    w = weights / weights.sum(dim=1, keepdim=True).clamp_min(1e-9)
+    return (w * d2).sum(dim=1).sqrt()
+
+
 def oakn_loss(
     offsets: Tensor, logits: Tensor, offsets_gt: Tensor, conf_gt: Tensor
 ) -> tuple[Tensor, dict[str, float]]:

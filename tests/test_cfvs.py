@@ -274,6 +274,41 @@ def test_a_coarse_estimate_from_far_is_looked_at_again_from_nearer(make_env):
     assert once.stage == "fine" and "looking again" not in once.phase
 
 
+@pytest.mark.parametrize("surer", ["first", "second"])
+def test_of_two_coarse_looks_the_one_oakn_is_surer_of_is_kept(make_env, surer):
+    """The second look's estimate replaces the first only when OAKN's candidates for the
+    opening lie closer together (`keypoint_spread`); the record says when it did not."""
+    from cfvs_maniskill.episode import observe
+
+    env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud", init_error="large")
+    obs, _ = env.reset(seed=3)
+    agent = CFVSAgent(TaskSpec.of(env.unwrapped.task))
+    agent.reset(0)
+    agent.act(observe(env, obs))  # from 30 cm: it looks again from nearer
+    first, spread = agent.estimate.copy(), agent.spread
+    assert 0.0 < spread < 0.05
+    elsewhere = first.copy()
+    elsewhere[:3, 3] += [0.05, 0.0, 0.0]
+    agent.coarse_look = lambda pts, tcp: (elsewhere, spread * (2.0 if surer == "first" else 0.5))
+    agent.act(observe(env, obs))
+    kept = first if surer == "first" else elsewhere
+    assert np.allclose(agent.estimate, kept) and agent.stage == "fine"
+    assert ("the first look's" in agent.phase) == (surer == "first")
+
+
+def test_keypoint_spread_is_the_weighted_rms_distance_of_the_candidates():
+    from cfvs_maniskill.policies.cfvs.oakn import keypoint_spread, weighted_keypoints
+
+    pts = torch.zeros(1, 4, 3)
+    offsets = torch.zeros(1, 4, 3, 3)
+    offsets[0, :, 0, 0] = torch.tensor([-0.01, 0.01, -0.03, 0.03])  # the opening's candidates
+    w = torch.tensor([[1.0, 1.0, 0.0, 0.0]])  # the far two carry no confidence
+    k, cand = weighted_keypoints(pts, offsets, w)
+    assert torch.allclose(keypoint_spread(cand, k, w), torch.tensor([0.01]))
+    k, cand = weighted_keypoints(pts, offsets, None)
+    assert torch.allclose(keypoint_spread(cand, k, None), torch.tensor([0.0005**0.5]))
+
+
 @pytest.mark.slow
 def test_same_seed_same_cfvs_episodes_across_processes(tmp_path):
     import json

@@ -71,7 +71,7 @@ def main(args: Args) -> dict:
     u = env.unwrapped
     spec = TaskSpec.of(task)
     # The estimate the fit starts from: OPN's, with the 6-DoF axis from the face.
-    agent = CFVSAgent(spec, CFVSConfig(opening_fit=False, face_height=False, face_guard=False))
+    agent = CFVSAgent(spec, CFVSConfig(opening_fit=False, face_height=False))
     half = hole_half_extent(task.peg, task.clearance)
     rows = []
     for i in tqdm(range(args.views), desc="wrist views"):
@@ -93,7 +93,7 @@ def main(args: Args) -> dict:
         a = agent.predict_offset(fine_crop(pts))
         if a is None:
             continue
-        a, _, _ = agent.refine(a, pts, tcp)
+        a, _ = agent.refine(a, pts, tcp)
         E = L.hole_frame_from_pre_insertion(L.apply_action(tcp, a))
         world = tool_to_world(pts, tcp)
         F = fit_opening(world, E, half, round_opening=task.peg == "round")

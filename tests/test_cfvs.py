@@ -408,7 +408,7 @@ def test_each_ablation_changes_its_component_alone():
     ("fields", "named"),
     [
         ({"rim_plane": False}, "needs rim_plane=True"),
-        ({"face_height": False}, "face_guard=True needs face_height=True"),
+        ({"opening_fit": True, "rim_plane": False}, "opening_fit=True needs rim_plane=True"),
         ({"coarse_to_fine": False}, "needs coarse_to_fine=True"),
     ],
 )

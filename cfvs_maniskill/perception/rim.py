@@ -7,17 +7,14 @@ fine network only infers (and misreads beside a raised block: on a stepped block
 the peg 7-10 deg off the axis). Other surfaces can reach into the ring (a step's wall, a
 rib, an edge's side face), so the plane is fitted by least median of squares: no distance
 threshold to tune per sensor, right while the face holds more than half the ring's points.
-Where it does not (ribs or a step beside the opening, the peg hiding the face near it),
-surfaces parallel to the face (a rib's top) still share its normal: a second fit votes the
-orientation of the ring's planar patches and takes over where the two disagree. For a
-square opening the ring follows its sides (nearest the opening, where a small face such as
-a boss's top still is), and falls back to a round ring beyond its corners.
+The ring follows the opening's nominal shape: for a square opening its sides (nearest the
+opening, where a small face such as a boss's top or a counterbore's floor still is),
+falling back to a round ring beyond its corners.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from cfvs_maniskill.geometry import angle_deg
 
@@ -43,29 +40,14 @@ RING_BAND = 0.025
 floor under an edge. Wide, because OPN's estimate of the opening's height can be 1-2 cm
 off on bodies unlike its training ones (on a flanged pipe 9 cm tall it put the opening
 14-20 mm too low, and a 10 mm band then held no face at all: 4 of 20 inserted in 6-DoF,
-20 of 20 at 25 mm; a hexagonal boss 7 -> 19); the tops of raised blocks and ribs that a wide band takes in are parallel to
-the face, which the parallel-planes check handles, and walls are outliers to both fits."""
+20 of 20 at 25 mm; a hexagonal boss 7 -> 19); the walls and the tops of raised blocks a
+wide band takes in are outliers to the least-median fit while the face holds most of the
+ring."""
 MIN_RING_POINTS = 60
 HYPOTHESES = 200
 """Random point triples tried by the least-median-of-squares fit."""
 MAX_TURN_DEG = 20.0
 """A fitted normal further than this from the estimate is taken for another surface."""
-NORMAL_SAMPLES = 300
-"""Parallel-planes fit: local normals at this many random ring points ..."""
-NORMAL_NEIGHBOURS = 16
-"""... each from the plane through its this many nearest ring points."""
-PARALLEL_CONE_DEG = (8.0, 30.0)
-"""Local normals within this angle of the dominant direction count as parallel to the face:
-the least and the most, between which the measured spread of the normals sets it."""
-PARALLEL_DISAGREE_DEG = 5.0
-"""The least-median plane is replaced by the parallel-planes fit when they differ by more
-than this. Measured (6-DoF episodes, search off): they agree within 2.5 deg under 3 mm
-i.i.d. depth noise on the test objects (140 fits; the least-median one is the more precise
-there, 0.41 against 1.16 deg p90), and differ by 11-14 deg where the face is a minority of
-the ring beside parallel surfaces (a ribbed disc's rib tops)."""
-LEVEL_GAP = 0.004
-"""Parallel patches more than this apart along the normal are separate planes (a face and
-a rib's top), each fitted about its own centre."""
 
 
 def rim_normal(
@@ -74,7 +56,6 @@ def rim_normal(
     axis: np.ndarray,
     opening_radius: float,
     rng: np.random.Generator,
-    parallel_planes: bool = True,
     square_x: np.ndarray | None = None,
     narrow_first: bool = True,
 ) -> np.ndarray | None:
@@ -85,19 +66,14 @@ def rim_normal(
     `opening_radius`: how far the opening reaches from its centre: a round hole's radius,
     a square hole's corner (its half width times sqrt(2)), or, with `square_x` (the square
     opening's x axis), its half width: the ring then follows the square's sides, so it
-    starts next to the opening along them instead of beyond its corners. `parallel_planes`:
-    check the least-median plane against the parallel-planes fit and take the latter where
-    they disagree by more than PARALLEL_DISAGREE_DEG (False: the least-median plane alone).
-    `narrow_first`: try the NARROW_RING_WIDTH ring first (False: RING_WIDTH always)."""
+    starts next to the opening along them instead of beyond its corners. `narrow_first`: try the NARROW_RING_WIDTH ring first (False: RING_WIDTH always)."""
     axis = axis / np.linalg.norm(axis)
-    n = _face_normal(
-        points, centre, axis, opening_radius, rng, parallel_planes, square_x, narrow_first
-    )
+    n = _face_normal(points, centre, axis, opening_radius, rng, square_x, narrow_first)
     if n is None and square_x is not None:
         # Too little of the face beside the sides is in view (the peg hides it from the
         # wrist camera, or it ends there): the round ring beyond the corners.
         reach = opening_radius * np.sqrt(2)
-        n = _face_normal(points, centre, axis, reach, rng, parallel_planes, None, narrow_first)
+        n = _face_normal(points, centre, axis, reach, rng, None, narrow_first)
     return n
 
 
@@ -107,11 +83,10 @@ def _face_normal(
     axis: np.ndarray,
     reach: float,
     rng: np.random.Generator,
-    parallel_planes: bool,
     square_x: np.ndarray | None = None,
     narrow_first: bool = True,
 ) -> np.ndarray | None:
-    """rim_normal on one ring: the least-median plane, checked by the parallel planes."""
+    """rim_normal on one ring: its least-median plane."""
     width = RING_WIDTH
     if narrow_first:
         width = _ring_width(points, centre, axis, reach + RING_MARGIN, rng, square_x)
@@ -119,14 +94,7 @@ def _face_normal(
     def ring(normal: np.ndarray) -> np.ndarray:
         return _ring(points, centre, normal, reach + RING_MARGIN, square_x, width)
 
-    around_axis = ring(axis)  # both fits start from it
-    n = _two_passes(ring, around_axis, axis, rng)
-    if parallel_planes:
-        # One pass to check (the fits agree nearly always), the second only to replace.
-        p = parallel_planes_normal(around_axis, axis, rng)
-        if p is not None and (n is None or angle_deg(n, p) > PARALLEL_DISAGREE_DEG):
-            n = parallel_planes_normal(ring(p), p, rng)
-            n = p if n is None else n
+    n = _two_passes(ring, ring(axis), axis, rng)
     if n is None or angle_deg(n, axis) > MAX_TURN_DEG:
         return None
     return n
@@ -281,45 +249,3 @@ def align_axis(H: np.ndarray, normal: np.ndarray) -> np.ndarray:
     R = np.eye(3) + s * K + (1 - c) * (K @ K)  # Rodrigues
     out[:3, :3] = R @ H[:3, :3]
     return out
-
-
-def parallel_planes_normal(
-    ring: np.ndarray, guess: np.ndarray, rng: np.random.Generator
-) -> np.ndarray | None:
-    """The normal shared by the planar patches of the ring (on `guess`'s side), or None.
-
-    Beside ribs, steps or a boss the ring holds the face and other surfaces parallel to it
-    (a rib's top) with neither above half its points; a least-median plane then runs
-    through both at an angle (measured: 12-14 deg on a ribbed disc). Here every patch
-    votes its own orientation, so parallel patches agree wherever they sit: local normals
-    at a sample of ring points, their dominant direction by mean shift from the guess,
-    then one least-squares normal common to all patches along it, each level about its own
-    centre (a face and a rib's top 2 cm above it fit as one orientation)."""
-    if len(ring) < MIN_RING_POINTS:
-        return None
-    tree = cKDTree(ring)
-    at = ring[rng.choice(len(ring), min(len(ring), NORMAL_SAMPLES), replace=False)]
-    _, idx = tree.query(at, k=min(NORMAL_NEIGHBOURS, len(ring)))
-    nb = ring[idx]  # (s, k, 3)
-    centred = nb - nb.mean(axis=1, keepdims=True)
-    normals = np.linalg.eigh(np.einsum("ski,skj->sij", centred, centred))[1][:, :, 0]
-    normals *= np.where(normals @ guess < 0, -1.0, 1.0)[:, None]
-    n, cone = guess, np.radians(MAX_TURN_DEG)
-    for _ in range(6):  # mean shift on the sphere, the cone narrowing to the normals' spread
-        near = normals @ n > np.cos(cone)
-        if np.count_nonzero(near) < NORMAL_SAMPLES // 10:
-            return None
-        n = normals[near].mean(axis=0)
-        n /= np.linalg.norm(n)
-        spread = 1.4826 * np.median(np.arccos(np.clip(normals[near] @ n, -1.0, 1.0)))
-        cone = np.clip(2.5 * spread, *np.radians(PARALLEL_CONE_DEG))
-    points = at[normals @ n > np.cos(cone)]  # not their neighbours: those reach round edges
-    level = points @ n
-    order = np.argsort(level)
-    splits = np.flatnonzero(np.diff(level[order]) > LEVEL_GAP) + 1
-    parts = [points[g] - points[g].mean(axis=0) for g in np.split(order, splits) if len(g) >= 10]
-    if sum(len(g) for g in parts) < MIN_RING_POINTS // 2:
-        return None
-    _, _, vt = np.linalg.svd(np.vstack(parts), full_matrices=False)
-    out = vt[2]
-    return out if out @ guess >= 0 else -out

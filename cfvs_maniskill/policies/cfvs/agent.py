@@ -38,7 +38,7 @@ from cfvs_maniskill.perception.clouds import (
     valid_world_points,
     world_object_points,
 )
-from cfvs_maniskill.perception.opening import MIN_LEVEL_POINTS, face_height, fit_opening
+from cfvs_maniskill.perception.opening import face_height, fit_opening
 from cfvs_maniskill.perception.peg import apply as apply_correction
 from cfvs_maniskill.perception.peg import peg_correction
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
@@ -118,7 +118,6 @@ class CFVSAgent(Agent):
         self.rng = np.random.default_rng(0)
         self.stage = "coarse"
         self.fine_steps = 0
-        self.had_face = False
         self.correction = IDENTITY
         self.peg_fix: np.ndarray | None = None
 
@@ -126,7 +125,6 @@ class CFVSAgent(Agent):
         self.stage, self.fine_steps = "coarse", 0
         self.correction = IDENTITY  # the camera's errors change with the episode
         self.peg_fix = None
-        self.had_face = False  # whether any fine estimate had its face seen round it
         self.blind_x: list[np.ndarray] = []  # tool x axes whose fine look saw nothing
         self.rise = 0.0  # how much further back than the pre-insertion pose it servoes
         self.phase, self.estimate = "", None
@@ -182,15 +180,12 @@ class CFVSAgent(Agent):
         k, _ = weighted_keypoints(x, offsets, torch.sigmoid(logits))
         return np.array([L.fine_action_from_keypoints(ki.numpy()) for ki in k], np.float64)
 
-    def refine(
-        self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray
-    ) -> tuple[np.ndarray, str, bool | None]:
+    def refine(self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray) -> tuple[np.ndarray, str]:
         """OPN's offset `a` refined by the geometry of the face round the opening it points
         at: in 6-DoF the hole's axis from the face's normal (`rim_plane`; 3- and 4-DoF holes
         are upright), then the centre (and a square's yaw) from the opening seen on that
         face (`opening_fit`) and its height from the face (`face_height`). Returns the
-        offset, where it came from, and whether the face was seen round the opening (None:
-        not measured); (a, "OPN offset", None) when the 6-DoF ring gives no face."""
+        offset and where it came from; (a, "OPN offset") when the 6-DoF ring gives no face."""
         T = L.apply_action(tcp, a)
         T = T if self.task.dof == 6 else self.constrain(T, tcp)
         H = L.hole_frame_from_pre_insertion(T)
@@ -201,7 +196,7 @@ class CFVSAgent(Agent):
         if self.task.dof == 6:
             n = self.rim_axis(world, H, half)
             if n is None:
-                return a, "OPN offset", None
+                return a, "OPN offset"
             H, where = align_axis(H, n), "axis from the rim"
         seen = (
             fit_opening(world, H, half, round_opening=round_opening)
@@ -210,34 +205,21 @@ class CFVSAgent(Agent):
         )
         where += ", OPN position" if seen is None else ", centre from the opening"
         H = H if seen is None else seen
-        face_seen = None
         if self.cfg.face_height:
-            level, ring_points = face_height(world, H, half, round_opening=round_opening)
-            face_seen = ring_points >= MIN_LEVEL_POINTS
+            level, _ = face_height(world, H, half, round_opening=round_opening)
             if level is not None:
                 H = H.copy()
                 H[:3, 3] += level * H[:3, 2]
                 where += ", height from the face"
         pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
-        return L.fine_action(tcp, pose), where, face_seen
+        return L.fine_action(tcp, pose), where
 
     def rim_axis(self, world: np.ndarray, H: np.ndarray, half: float) -> np.ndarray | None:
         """The hole's axis from the face round the opening of hole frame `H` (its normal,
         `rim_plane`), or None when the ring round the opening shows no face."""
-        reach, square_x = half, None
-        if self.peg == "square" and self.cfg.rim_square_ring:
-            square_x = H[:3, 0]  # the ring follows the opening's sides
-        elif self.peg == "square":
-            reach *= np.sqrt(2)  # a round ring beyond the opening's corners
+        square_x = H[:3, 0] if self.peg == "square" else None  # the ring follows its sides
         return rim_normal(
-            world,
-            H[:3, 3],
-            H[:3, 2],
-            reach,
-            self.rng,
-            parallel_planes=self.cfg.rim_parallel_planes,
-            square_x=square_x,
-            narrow_first=self.cfg.rim_narrow_ring,
+            world, H[:3, 3], H[:3, 2], half, self.rng, square_x, self.cfg.rim_narrow_ring
         )
 
     def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
@@ -345,12 +327,7 @@ class CFVSAgent(Agent):
                 return again or Action.give_up("OPN: nothing seen around the peg")
             source = "OPN offset"
             if self.cfg.rim_plane:
-                a, source, face_seen = self.refine(a, pts, tcp)
-                if self.cfg.face_guard and face_seen is False and self.had_face:
-                    self.stage = "insert"
-                    self.phase = "fine: no face round OPN's new estimate, insert from the last"
-                    return self.insert(tcp)
-                self.had_face = self.had_face or bool(face_seen)
+                a, source = self.refine(a, pts, tcp)
             # the remaining offset in the allowed DoF only
             pre = self.constrain(L.apply_action(tcp, a), tcp)  # the pre-insertion pose
             self.estimate = L.hole_frame_from_pre_insertion(pre)

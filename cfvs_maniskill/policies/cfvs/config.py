@@ -46,14 +46,6 @@ class CFVSConfig:
     (`refine`): in 6-DoF the hole's axis becomes the face's normal (perception/rim.py; 3-
     and 4-DoF holes are upright); OPN still gives where the hole is. False: the paper's
     fine stage (the `cfvs_no_rim` ablation)."""
-    rim_parallel_planes: bool = True
-    """6-DoF: check the face's least-median plane against a fit of the ring's parallel planar
-    patches (perception/rim.py) and take the latter where they disagree: beside a rib or a
-    step the face may hold under half the ring. False: the least-median plane alone."""
-    rim_square_ring: bool = True
-    """6-DoF square holes: the ring follows the opening's sides (from OPN's yaw), starting 4
-    mm outside them. False: a round ring beyond the opening's corners, which can fall off a
-    small face (a boss, a hub) onto whatever is beyond."""
     rim_narrow_ring: bool = True
     """6-DoF: the rim fit tries a 10 mm ring before the 20 mm one and keeps it when the
     noise measured on it predicts a normal within 0.1 deg (perception/rim.py): beside a step
@@ -68,12 +60,6 @@ class CFVSConfig:
     """With `rim_plane`: put the hole's opening at the level of the face seen just outside
     it (perception/opening.face_height) instead of OPN's height, which walls and flanges
     beside the opening pull up. False: OPN's height."""
-    face_guard: bool = True
-    """With `face_height`: when OPN's new estimate has no face round its opening in the
-    cloud (fewer than MIN_LEVEL_POINTS 1-6 mm outside it) after an estimate that had one,
-    the fine loop stops and the peg is inserted from where it is, the pose of the last
-    estimate the face supported: beside a step OPN can jump to another surface and back.
-    False: every estimate is taken."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the
@@ -81,7 +67,8 @@ class CFVSConfig:
     face). False: always the nearest."""
     look_again: bool = True
     """Look again from a better view where one look cannot be trusted: OAKN's estimate made
-    from further than 20 cm is taken again from 15 cm (agent.NEAR_VIEW), and when a fine
+    from further than 20 cm is taken again from 15 cm (agent.NEAR_VIEW), the look whose
+    candidates lie closer together kept (`keypoint_spread`); and when a fine
     look sees nothing round the peg (the opening nearer than the camera's
     minimum range, a wall between the camera and the opening), look again from another
     view of the same estimate: 2 cm further back, then (a square in 4/6-DoF) turned
@@ -122,9 +109,6 @@ REQUIRES = {
     "look_again": "coarse_to_fine",
     "opening_fit": "rim_plane",
     "face_height": "rim_plane",
-    "face_guard": "face_height",
-    "rim_parallel_planes": "rim_plane",
-    "rim_square_ring": "rim_plane",
     "rim_narrow_ring": "rim_plane",
 }
 """Switch -> the switch it refines: a config with the first on and the second off is
@@ -138,11 +122,8 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     # The paper's own fine stage, and one per component of ours (docs/cfvs.md).
     "no_rim": ("rim_plane", "the paper's fine stage: OPN's estimate, no face geometry"),
     "opn_height": ("face_height", "the opening's height from OPN, not from the face"),
-    "no_face_guard": ("face_guard", "every fine estimate taken, with or without a face"),
     "no_opening": ("opening_fit", "the opening's centre (a square's yaw) from OPN alone"),
-    "no_parallel": ("rim_parallel_planes", "the face's plane by least median of squares alone"),
     "wide_ring": ("rim_narrow_ring", "the rim fit on the 20 mm ring always"),
-    "round_ring": ("rim_square_ring", "a round rim ring beyond a square opening's corners"),
     "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
     "no_look_again": ("look_again", "one coarse look; give up when a fine look sees nothing"),
     "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),

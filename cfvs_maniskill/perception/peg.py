@@ -121,10 +121,10 @@ def centre_across(
     width = spans[f, 1] - spans[f, 0]
     if count[f] < MIN_PEG_POINTS or width < 4 * band:
         return T
-    # By the plane, not by the nearest face: past a drawn edge, a point is still this face's.
     t = np.cross([0.0, 0.0, 1.0], n[f])
     if np.any(fitted & (np.abs(n @ t) > 0.5)):
         return T
+    # By the plane, not by the nearest face: past a drawn edge, a point is still this face's.
     lo, hi = np.percentile(q[np.abs(signed[:, f]) <= band] @ t, [1, 99])  # robust to strays
     if hi - lo < MIN_SPAN_SEEN * width:
         return T

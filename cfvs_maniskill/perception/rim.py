@@ -66,7 +66,8 @@ def rim_normal(
     `opening_radius`: how far the opening reaches from its centre: a round hole's radius,
     a square hole's corner (its half width times sqrt(2)), or, with `square_x` (the square
     opening's x axis), its half width: the ring then follows the square's sides, so it
-    starts next to the opening along them instead of beyond its corners. `narrow_first`: try the NARROW_RING_WIDTH ring first (False: RING_WIDTH always)."""
+    starts next to the opening along them instead of beyond its corners. `narrow_first`:
+    try the NARROW_RING_WIDTH ring first (False: RING_WIDTH always)."""
     axis = axis / np.linalg.norm(axis)
     n = _face_normal(points, centre, axis, opening_radius, rng, square_x, narrow_first)
     if n is None and square_x is not None:

@@ -314,8 +314,8 @@ class CFVSAgent(Agent):
             if first and (view := self.nearer_view(H, tcp)) is not None:
                 return view
             self.phase = "coarse: OAKN keypoints -> hole frame"
-            if not took:
-                self.phase += ", the first look's (its candidates closer together)"
+            if not took:  # the nearer look saw no object, or its candidates lay further apart
+                self.phase += ", the first look's"
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
             pose = self.approach(H, tool_to_world(pts, tcp), tcp)
             return Action.move(self.constrain(pose, tcp))

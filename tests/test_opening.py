@@ -122,41 +122,62 @@ def test_a_round_openings_height_and_none_without_a_clear_face():
     assert face_height(pts, _frame(0.0, (0.2, 0.0, 0.0)), radius, True) == (None, 0)
 
 
-def _round_view(rng, radius=0.025, noise=0.001, shift=0.008, narrowing=0.0006):
+def _round_view(
+    rng, radius=0.025, noise=0.001, shift=0.008, narrowing=0.0006, walls=2000, faces=40000
+):
     """Points (hole frame = world) of a face round a circular opening of `radius` at the
-    origin as the wrist camera sees it from the +x side: the face all round but the peg's
-    shadow (a disc 2 mm narrower than the opening, `shift` towards +x: a crescent 6 mm wide
-    beyond the +x edge), the far (-x) half of the wall down to 40 mm seen `narrowing`
-    inside the true circle (the simulated camera's error at walls)."""
-    g = rng.uniform(-0.045, 0.045, size=(40000, 2))
+    origin as the wrist camera sees it from the +x side: `faces` points drawn over the face
+    all round but the peg's shadow (a disc 2 mm narrower than the opening, `shift` towards
+    +x: a crescent 6 mm wide beyond the +x edge), `walls` on the far (-x) half of the wall
+    down to 40 mm, seen `narrowing` inside the true circle (the simulated camera's error
+    at walls)."""
+    g = rng.uniform(-0.045, 0.045, size=(faces, 2))
     d = np.linalg.norm(g, axis=1)
     in_shadow = np.linalg.norm(g - [shift, 0.0], axis=1) < radius - 0.002
     face = g[(d > radius) & ~in_shadow]
     pts = [np.column_stack([face, np.zeros(len(face))])]
-    a = rng.uniform(np.pi / 2, 3 * np.pi / 2, 2000)
-    z = rng.uniform(-0.04, 0.0, 2000)
+    a = rng.uniform(np.pi / 2, 3 * np.pi / 2, walls)
+    z = rng.uniform(-0.04, 0.0, walls)
     r = radius - narrowing
     pts.append(np.column_stack([r * np.cos(a), r * np.sin(a), z]))
     p = np.vstack(pts)
     return p + rng.normal(0.0, noise, p.shape)
 
 
-@pytest.mark.parametrize("noise, within", [(0.0003, 0.3), (0.001, 0.5)])
+@pytest.mark.parametrize(
+    "noise, walls, within", [(0.0003, 2000, 0.3), (0.001, 2000, 0.5), (0.0003, 0, 0.3)]
+)
 def test_a_round_openings_centre_is_found_from_a_wrong_estimate_despite_the_pegs_shadow(
-    noise, within
+    noise, walls, within
 ):
+    """From the wall's points where they are seen, else from the face's edge round the
+    opening, which the peg's shadow pushes out on one side."""
     rng = np.random.default_rng(5)
-    pts = _round_view(rng, noise=noise)
+    pts = _round_view(rng, noise=noise, walls=walls)
     for start in [(0.003, -0.002, 0.004), (-0.002, 0.0025, -0.005), (0.0, -0.004, 0.0)]:
         F = fit_opening(pts, _frame(0.0, start), 0.025, round_opening=True)
         assert F is not None, start
-        # The shadow's edge is up to 6 mm beyond the true +x edge, the wall 0.6 mm
-        # inside: taken at face value they would put the centre millimetres off.
+        # The shadow's edge is up to 6 mm beyond the true +x edge: taken at face value it
+        # would put the centre millimetres off.
         assert _errors(F)[0] < within, (start, _errors(F))
         assert F[:3, 2] @ [0, 0, 1] > 0.9999  # moved in the face's plane only
     # Nothing round the estimate, or a face seen on one side only: no answer.
     assert fit_opening(pts, _frame(0.0, (0.2, 0.0, 0.0)), 0.025, round_opening=True) is None
     one_side = pts[pts[:, 1] > 0.01]
+    assert fit_opening(one_side, _frame(), 0.025, round_opening=True) is None
+
+
+def test_a_round_opening_is_found_in_a_sparse_stereo_cloud():
+    """A passive stereo camera on a plain part (the `realistic` profile) fills a few points
+    per square centimetre: about 60 on the face beside the opening and 100 on its wall, too
+    few to draw the face's edge sector by sector, enough to fit the wall's circle."""
+    rng = np.random.default_rng(7)
+    pts = _round_view(rng, noise=0.0006, narrowing=0.0, walls=100, faces=400)
+    for start in [(0.003, -0.002, 0.002), (-0.003, 0.0025, -0.003)]:
+        F = fit_opening(pts, _frame(0.0, start), 0.025, round_opening=True)
+        assert F is not None, start
+        assert _errors(F)[0] < 0.5, (start, _errors(F))
+    one_side = pts[pts[:, 1] > 0.01]  # a quarter of the wall: no answer
     assert fit_opening(one_side, _frame(), 0.025, round_opening=True) is None
 
 

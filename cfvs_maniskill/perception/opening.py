@@ -82,6 +82,16 @@ MIN_SECTOR_WALL = 8
 SECTOR_OUTLIER = 0.0005
 """... through the sectors within this of it (the peg's shadow moves a face edge outwards
 by millimetres)."""
+MIN_CIRCLE_WALL = 40
+"""A round opening's centre is fitted to the wall's own points when at least this many are
+seen round it ..."""
+WALL_ITERATIONS = 8
+"""... reweighted this many times ..."""
+WALL_MIN_SCALE = 0.0002
+"""... the outliers' weight set on their robust spread, taken as at least this (m) ..."""
+MIN_WALL_SPREAD = 0.15
+"""... and their directions from the centre spanning an arc of about 100 deg or more (the
+smaller eigenvalue of their mean outer product: 0.5 all round, 0.15 for 100 deg)."""
 MAX_CONDITION = 10.0
 """The walls' narrowing is fitted only when the sectors' equations tell it from the centre
 this well (condition number)."""
@@ -267,6 +277,43 @@ def _square(face: np.ndarray, wall: np.ndarray, half: float):
 
 
 def _circle(face: np.ndarray, wall: np.ndarray, radius: float):
+    """((cx, cy), 0) of a round opening of `radius` from the face points `face` and the
+    points below the face `wall` (its frame), or None: from one edge per sector round it
+    (`_sector_circle`) where the cloud is dense enough to draw them, else from the wall's
+    own points (`_wall_circle`: a passive stereo camera on a plain part fills a few points
+    per sector)."""
+    fit = _sector_circle(face, wall, radius)
+    if fit is not None:
+        return fit
+    near = wall[np.abs(np.linalg.norm(wall[:, :2], axis=1) - radius) < WALL_NEAR + SEARCH / 2]
+    return _wall_circle(near[:, :2], radius) if len(near) >= MIN_CIRCLE_WALL else None
+
+
+def _wall_circle(p: np.ndarray, radius: float):
+    """((cx, cy), 0): the circle of `radius` through the wall points `p` (x, y), by
+    iteratively reweighted least squares (Tukey's biweight on their robust spread: the
+    hole's floor and a counterbore's wall count for nothing); None when too few agree or
+    they span too short an arc (MIN_WALL_SPREAD).
+    The walls are taken where the camera puts them: on sparse stereo clouds their
+    narrowing is not told from the centre, and was measured there as 0 +- 0.4 mm."""
+    c = np.zeros(2)
+    w = np.ones(len(p))
+    for _ in range(WALL_ITERATIONS):
+        d = p - c
+        rho = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+        sw = np.sqrt(w)
+        c = c + np.linalg.lstsq(d / rho[:, None] * sw[:, None], (rho - radius) * sw, rcond=None)[0]
+        res = np.linalg.norm(p - c, axis=1) - radius
+        scale = max(WALL_MIN_SCALE, 1.4826 * float(np.median(np.abs(res - np.median(res)))))
+        w = (1.0 - np.clip(res / (4.685 * scale), -1.0, 1.0) ** 2) ** 2
+    d = p[w > 0] - c
+    dirs = d / np.linalg.norm(d, axis=1)[:, None]
+    if len(d) < MIN_CIRCLE_WALL or np.linalg.eigvalsh(dirs.T @ dirs / len(d))[0] < MIN_WALL_SPREAD:
+        return None
+    return (float(c[0]), float(c[1])), 0.0
+
+
+def _sector_circle(face: np.ndarray, wall: np.ndarray, radius: float):
     """((cx, cy), 0) of a round opening of `radius` from the face points `face` and the
     points below the face `wall` (its frame), or None. Each sector gives one edge: where
     its wall is seen, the wall's median distance (noise lifts the wall's top into the

@@ -71,7 +71,7 @@ def main(args: Args) -> dict:
     u = env.unwrapped
     spec = TaskSpec.of(task)
     # The estimate the fit starts from: OPN's, with the 6-DoF axis from the face.
-    agent = CFVSAgent(spec, CFVSConfig(opening_fit=False, face_height=False))
+    agent = CFVSAgent(spec, CFVSConfig(opening_fit=False))
     half = hole_half_extent(task.peg, task.clearance)
     rows = []
     for i in tqdm(range(args.views), desc="wrist views"):

@@ -184,8 +184,8 @@ class CFVSAgent(Agent):
         """OPN's offset `a` refined by the geometry of the face round the opening it points
         at: in 6-DoF the hole's axis from the face's normal (`rim_plane`; 3- and 4-DoF holes
         are upright), then the centre (and a square's yaw) from the opening seen on that
-        face (`opening_fit`) and its height from the face (`face_height`). Returns the
-        offset and where it came from; (a, "OPN offset") when the 6-DoF ring gives no face."""
+        face and its height from the face (`opening_fit`). Returns the offset and where it
+        came from; (a, "OPN offset") when the 6-DoF ring gives no face."""
         T = L.apply_action(tcp, a)
         T = T if self.task.dof == 6 else self.constrain(T, tcp)
         H = L.hole_frame_from_pre_insertion(T)
@@ -198,14 +198,10 @@ class CFVSAgent(Agent):
             if n is None:
                 return a, "OPN offset"
             H, where = align_axis(H, n), "axis from the rim"
-        seen = (
-            fit_opening(world, H, half, round_opening=round_opening)
-            if self.cfg.opening_fit
-            else None
-        )
-        where += ", OPN position" if seen is None else ", centre from the opening"
-        H = H if seen is None else seen
-        if self.cfg.face_height:
+        if self.cfg.opening_fit:
+            seen = fit_opening(world, H, half, round_opening=round_opening)
+            where += ", OPN position" if seen is None else ", centre from the opening"
+            H = H if seen is None else seen
             level, _ = face_height(world, H, half, round_opening=round_opening)
             if level is not None:
                 H = H.copy()
@@ -218,9 +214,7 @@ class CFVSAgent(Agent):
         """The hole's axis from the face round the opening of hole frame `H` (its normal,
         `rim_plane`), or None when the ring round the opening shows no face."""
         square_x = H[:3, 0] if self.peg == "square" else None  # the ring follows its sides
-        return rim_normal(
-            world, H[:3, 3], H[:3, 2], half, self.rng, square_x, self.cfg.rim_narrow_ring
-        )
+        return rim_normal(world, H[:3, 3], H[:3, 2], half, self.rng, square_x)
 
     def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
         """The pre-insertion pose over hole frame `H`: at the yaw nearest the tool's own or,
@@ -278,20 +272,20 @@ class CFVSAgent(Agent):
         return constrain(self.task, T, ref)
 
     def calibrated_points(self, xyzw: np.ndarray, tcp: np.ndarray) -> np.ndarray:
-        """The cloud's world points that saw something, with the episode's table
-        calibration applied (measured on the coarse view, where most of the table is in
-        sight), then moved onto the peg it shows (`peg_calibration`, measured on the same
-        view, where no part stands near the peg)."""
+        """The cloud's world points that saw something, with the episode's `calibration`:
+        the table's (measured on the coarse view, where most of the table is in sight),
+        then moved onto the peg it shows (measured on the same view, where no part stands
+        near the peg)."""
         world = valid_world_points(xyzw)
-        if self.cfg.table_calibration:
+        if self.cfg.calibration:
             camera = tcp.copy()  # the tool's axes serve: the camera is fixed to the tool
             camera[:3, 3] = tcp[:3, :3] @ self.task.camera_in_tcp() + tcp[:3, 3]
-            if self.stage == "coarse":
+            if self.stage == "coarse":  # most of the table in sight, nothing near the peg
                 self.correction = correction_from_table(world, camera) or IDENTITY
-            world = self.correction.apply(world.astype(np.float64), camera)
-        if self.cfg.peg_calibration:
-            if self.stage == "coarse":  # nothing stands near the peg yet
+                world = self.correction.apply(world.astype(np.float64), camera)
                 self.peg_fix = peg_correction(world, tcp, self.peg, self.task.peg_chamfer)
+            else:
+                world = self.correction.apply(world.astype(np.float64), camera)
             world = apply_correction(self.peg_fix, world, tcp)
         return world
 

@@ -54,7 +54,7 @@ def fine_start(u, H: np.ndarray, rng, max_translation: float, constrain=None, tr
 
 def seen_object_points(task, obs, tcp: np.ndarray) -> np.ndarray:
     """Tool-frame object points of a view as the agent reads them: the cloud moved onto the
-    peg it shows (`peg_calibration`; a camera that does not see the peg leaves it as it is),
+    peg it shows (as `calibration` does; a camera that does not see the peg leaves it as it is),
     then the table and the peg dropped. Fitted on each view: a sample has only its own."""
     world = valid_world_points(obs["pointcloud"]["xyzw"][0].numpy())
     fix = peg_correction(world, tcp, task.peg, task.peg_chamfer)

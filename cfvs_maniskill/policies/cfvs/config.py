@@ -43,23 +43,16 @@ class CFVSConfig:
     e_t of the offset it measured."""
     rim_plane: bool = True
     """Refine OPN's estimate by the geometry of the face round the opening it points at
-    (`refine`): in 6-DoF the hole's axis becomes the face's normal (perception/rim.py; 3-
-    and 4-DoF holes are upright); OPN still gives where the hole is. False: the paper's
-    fine stage (the `cfvs_no_rim` ablation)."""
-    rim_narrow_ring: bool = True
-    """6-DoF: the rim fit tries a 10 mm ring before the 20 mm one and keeps it when the
-    noise measured on it predicts a normal within 0.1 deg (perception/rim.py): beside a step
-    round the opening (a counterbore) the wide ring reaches the step. False: the 20 mm
-    ring always."""
+    (`refine`): in 6-DoF the hole's axis becomes the face's normal (perception/rim.py: the
+    narrowest ring round the opening whose noise predicts a normal within 0.1 deg; 3- and
+    4-DoF holes are upright); OPN still gives where the hole is. False: the paper's fine
+    stage (the `cfvs_no_rim` ablation)."""
     opening_fit: bool = True
-    """With `rim_plane`: move the estimate in the face's plane (and turn a square about its
-    axis) onto the opening the wrist cloud shows, from the face's edge and the walls in
-    view (perception/opening.py; the hole's size is the task's nominal one): a square's
-    sides, a round hole's circle. False: OPN's position and yaw."""
-    face_height: bool = True
-    """With `rim_plane`: put the hole's opening at the level of the face seen just outside
-    it (perception/opening.face_height) instead of OPN's height, which walls and flanges
-    beside the opening pull up. False: OPN's height."""
+    """With `rim_plane`: place the opening on the face the wrist cloud shows round it
+    (perception/opening.py; its shape and size are the task's nominal ones): at the level
+    of the face just outside it (walls and flanges beside the opening pull OPN's height
+    up), centred on its edge and walls (a square's sides, a round hole's circle), a square
+    turned onto its walls. False: OPN's position and yaw."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the
@@ -74,15 +67,13 @@ class CFVSConfig:
     view of the same estimate: 2 cm further back, then (a square in 4/6-DoF) turned
     about the hole's axis, which puts the camera on another side of the opening, up to
     three turns. False: give up there."""
-    table_calibration: bool = True
-    """Correct the camera's depth scale and two of its mount angles once per episode, from
-    the table plane in the coarse view, whose height the robot knows
-    (perception/table_calibration.py). False: the cloud as the camera reports it."""
-    peg_calibration: bool = True
-    """Where the camera sees the peg (a mount like `peg_view`), move every cloud so the peg
-    it shows sits where the arm holds it (perception/peg.py): the hole is then placed
-    relative to the peg's tip as the camera sees both, whatever the hand-eye error. False:
-    the cloud as the (table-calibrated) camera places it."""
+    calibration: bool = True
+    """Correct the camera from what the robot knows is in view, measured on the coarse view
+    and applied to every view of the episode: the table plane, at a known height, gives the
+    depth scale and two mount angles (perception/table_calibration.py); the peg, where the
+    mount shows it (`tip_view`), moves the cloud so the peg sits where the arm holds it
+    (perception/peg.py), so the hole is placed relative to the tip as the camera sees both.
+    False: the cloud as the camera reports it."""
     weights_dir: Path = WEIGHTS_DIR
 
     def __post_init__(self) -> None:
@@ -108,8 +99,6 @@ REQUIRES = {
     "final_correction": "coarse_to_fine",
     "look_again": "coarse_to_fine",
     "opening_fit": "rim_plane",
-    "face_height": "rim_plane",
-    "rim_narrow_ring": "rim_plane",
 }
 """Switch -> the switch it refines: a config with the first on and the second off is
 refused, since the first would silently do nothing."""
@@ -121,14 +110,11 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     "aug": ("augmentation", "networks trained with the paper's augmentation"),
     # The paper's own fine stage, and one per component of ours (docs/cfvs.md).
     "no_rim": ("rim_plane", "the paper's fine stage: OPN's estimate, no face geometry"),
-    "opn_height": ("face_height", "the opening's height from OPN, not from the face"),
-    "no_opening": ("opening_fit", "the opening's centre (a square's yaw) from OPN alone"),
-    "wide_ring": ("rim_narrow_ring", "the rim fit on the 20 mm ring always"),
+    "no_opening": ("opening_fit", "the opening's height, centre (a square's yaw) from OPN"),
     "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
     "no_look_again": ("look_again", "one coarse look; give up when a fine look sees nothing"),
     "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
-    "no_table_calibration": ("table_calibration", "the cloud as reported, not set by the table"),
-    "no_peg_calibration": ("peg_calibration", "the cloud not moved onto the peg it shows"),
+    "no_calibration": ("calibration", "the cloud as reported, not set by the table and peg"),
 }
 """`cfvs_<name>`: CFVS with one component changed (the switch, then what it says)."""
 

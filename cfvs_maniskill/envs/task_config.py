@@ -30,9 +30,9 @@ class TaskConfigError(FileFieldError):
 Metres = Annotated[float, Field(ge=-1.0, le=1.0)]
 """A position on the table, world frame: within the UR5's reach (0.85 m) of its base."""
 Degrees = Annotated[float, Field(ge=-180.0, le=180.0)]
-# The two measured contact offsets a task without one gets (TaskConfig.contact_offset).
 LOOSE_CONTACT_OFFSET = 0.002
-TIGHT_CONTACT_OFFSET = 0.0002
+"""The contact offset of a task without one, or half its clearance if that is less
+(TaskConfig.contact_offset)."""
 
 
 @dataclass(frozen=True)
@@ -63,12 +63,15 @@ class TaskConfig:
     none), which was most of the 1 mm failures."""
     contact_offset: Annotated[float, Field(gt=0.0, le=0.02)] | None = None
     """PhysX contact offset of every collision shape, metres: shape pairs closer than the sum
-    of their offsets get contacts. Unset: 2 mm where that is at most half the clearance (it
-    catches the peg's fastest approach at 500 Hz), else 0.2 mm. Tight fits need the small
-    one: with 2 mm or 0.5 mm, PhysX's convex-convex contacts held a peg centred within
-    0.06 mm 1.7 mm into a 0.5 mm-clearance entry, on contacts reported touching
-    (separation 0, the peg chamfer's 45 deg normals) at the hole's corners while the walls
-    were 0.25 mm away; the true pose then went in 73 of 80 times, with 0.2 mm 80 of 80."""
+    of their offsets get contacts. Unset: 2 mm (it catches the peg's fastest approach at
+    500 Hz), or half the clearance where that is less. Not more: with 2 mm or 0.5 mm at
+    0.5 mm clearance, PhysX's convex-convex contacts held a peg centred within 0.06 mm
+    1.7 mm into the entry, on contacts reported touching (the peg chamfer's 45 deg normals)
+    at the hole's corners while the walls were 0.25 mm away. Not less: PhysX makes the
+    contacts of a wall the peg comes within the contact distance of only after the peg has
+    crossed it (a peg sliding 4 mm/s across a 1 mm-clearance hole went 0.4 mm into the
+    wall with a 0.2 mm offset, none with 0.4 mm), so the contact distance (twice the
+    offset) should span the play: both walls' contacts then stay made."""
     hole_depth: Annotated[float, Field(gt=0.0, lt=PEG_LENGTH)] = DEFAULT_HOLE_DEPTH
     """Depth of the hole, metres (less than the peg's length, or the flange hits the face)."""
     objects: Annotated[tuple[str, ...], Field(min_length=1)] = ("test",)
@@ -111,9 +114,7 @@ class TaskConfig:
 
     def __post_init__(self) -> None:
         if self.contact_offset is None:
-            offset = LOOSE_CONTACT_OFFSET
-            if offset > self.clearance / 2:
-                offset = TIGHT_CONTACT_OFFSET
+            offset = min(LOOSE_CONTACT_OFFSET, self.clearance / 2)
             object.__setattr__(self, "contact_offset", offset)
 
     @property
@@ -169,7 +170,7 @@ def load_task(path: Path) -> TaskConfig:
             )
     if cfg.contact_offset > cfg.clearance / 2:
         # Measured at 0.5 mm clearance: 0.5 mm and 2 mm offsets stalled centred pegs in the
-        # entry, 0.2 mm did not (TaskConfig.contact_offset).
+        # entry (TaskConfig.contact_offset).
         raise TaskConfigError(
             path,
             "contact_offset",

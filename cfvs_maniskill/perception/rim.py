@@ -57,7 +57,6 @@ def rim_normal(
     opening_radius: float,
     rng: np.random.Generator,
     square_x: np.ndarray | None = None,
-    narrow_first: bool = True,
 ) -> np.ndarray | None:
     """Unit normal (on `axis`'s side) of the face around the opening estimated at `centre`
     with axis `axis` (out of the hole), from `points` (n, 3, same frame); None when the
@@ -66,15 +65,15 @@ def rim_normal(
     `opening_radius`: how far the opening reaches from its centre: a round hole's radius,
     a square hole's corner (its half width times sqrt(2)), or, with `square_x` (the square
     opening's x axis), its half width: the ring then follows the square's sides, so it
-    starts next to the opening along them instead of beyond its corners. `narrow_first`:
-    try the NARROW_RING_WIDTH ring first (False: RING_WIDTH always)."""
+    starts next to the opening along them instead of beyond its corners. The ring is
+    NARROW_RING_WIDTH wide where the noise on it allows (`_ring_width`), else RING_WIDTH."""
     axis = axis / np.linalg.norm(axis)
-    n = _face_normal(points, centre, axis, opening_radius, rng, square_x, narrow_first)
+    n = _face_normal(points, centre, axis, opening_radius, rng, square_x)
     if n is None and square_x is not None:
         # Too little of the face beside the sides is in view (the peg hides it from the
         # wrist camera, or it ends there): the round ring beyond the corners.
         reach = opening_radius * np.sqrt(2)
-        n = _face_normal(points, centre, axis, reach, rng, None, narrow_first)
+        n = _face_normal(points, centre, axis, reach, rng, None)
     return n
 
 
@@ -85,12 +84,9 @@ def _face_normal(
     reach: float,
     rng: np.random.Generator,
     square_x: np.ndarray | None = None,
-    narrow_first: bool = True,
 ) -> np.ndarray | None:
     """rim_normal on one ring: its least-median plane."""
-    width = RING_WIDTH
-    if narrow_first:
-        width = _ring_width(points, centre, axis, reach + RING_MARGIN, rng, square_x)
+    width = _ring_width(points, centre, axis, reach + RING_MARGIN, rng, square_x)
 
     def ring(normal: np.ndarray) -> np.ndarray:
         return _ring(points, centre, normal, reach + RING_MARGIN, square_x, width)

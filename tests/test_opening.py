@@ -150,8 +150,9 @@ def _round_view(
 def test_a_round_openings_centre_is_found_from_a_wrong_estimate_despite_the_pegs_shadow(
     noise, walls, within
 ):
-    """From the wall's points where they are seen, else from the face's edge round the
-    opening, which the peg's shadow pushes out on one side."""
+    """From one edge per sector round the opening: the wall's where it is seen, else the
+    face's edge, which the peg's shadow pushes out on one side (no wall at all: the face's
+    edges alone)."""
     rng = np.random.default_rng(5)
     pts = _round_view(rng, noise=noise, walls=walls)
     for start in [(0.003, -0.002, 0.004), (-0.002, 0.0025, -0.005), (0.0, -0.004, 0.0)]:

@@ -1,4 +1,4 @@
-"""Small SE(3) helpers on 4x4 numpy matrices (metres, radians)."""
+"""Small SE(3) helpers on 4x4 numpy matrices (metres, radians), and a robust spread."""
 
 from __future__ import annotations
 
@@ -128,3 +128,10 @@ def interpolator(T0: np.ndarray, T1: np.ndarray):
         return make(slerp([s]).as_matrix()[0], (1 - s) * p0 + s * p1)
 
     return at
+
+
+def robust_sigma(r: np.ndarray, centre: float | None = None) -> float:
+    """1.4826 x the median absolute deviation of residuals `r` from `centre` (their median
+    if None): the standard deviation of Gaussian inliers, blind to up to half outliers."""
+    c = np.median(r) if centre is None else centre
+    return 1.4826 * float(np.median(np.abs(r - c)))

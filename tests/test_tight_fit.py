@@ -40,10 +40,9 @@ def test_tight_task_files(tmp_path):
     for name, clearance in (("PegInsert6DoF-1mm", 0.001), ("PegInsert6DoF-0.5mm", 0.0005)):
         cfg = load_task(resources.bundled("tasks") / f"{name}.yaml")
         assert cfg.clearance == clearance and cfg.peg_chamfer == 0.0015 and cfg.dof == 6
-        assert cfg.pcm is False  # exact contacts (TaskConfig.pcm)
         assert cfg.contact_offset == clearance / 2  # the play per side (TaskConfig says why)
     paper = load_task(resources.bundled("tasks") / "PegInsert6DoF.yaml")
-    assert paper.pcm is True and paper.contact_offset == 0.002  # the paper's tasks keep them
+    assert paper.pcm is False and paper.contact_offset == 0.002  # exact contacts everywhere
     # A task file without a contact offset gets 2 mm, or half its clearance if less.
     offsets = {}
     for clearance in (0.004, 0.002, 0.0005):
@@ -263,7 +262,7 @@ def test_cfvs_seats_pegs_that_stale_contacts_used_to_jam(make_env):
     """CFVS on two 1 mm episodes whose pegs ended 1.5 deg askew and < 0.3 mm off the axis
     (room to spare: at 3 mm in they need 0.08 mm of the 0.5 mm on each side). With PhysX's
     persistent contact manifold both stuck 2-3 mm into the entry, held by stale contacts on
-    both rim edges; with exact contacts (the task's `pcm: false`) both go in."""
+    both rim edges; with exact contacts (`pcm: false`, every task's default) both go in."""
     env = make_env("PegInsert6DoF-1mm-v1", obs_mode="pointcloud")
     agent, ex = make_agent("cfvs", env), Executor(env)
     for seed in (5000, 5012):

@@ -10,6 +10,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -155,7 +156,8 @@ def test_installed_package_runs_from_another_folder(user, tmp_path):
         assert wheel_rec[k] == repo_rec[k], k
     for k in ("weights", "sensor", "task", "object"):  # the same files, by the same names
         assert wheel_rec["provenance"][k] == repo_rec["provenance"][k], k
-    assert wheel_rec["provenance"]["code"] == "0.1.0"  # the installed version, not git
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    assert wheel_rec["provenance"]["code"] == version  # the installed version, not git
 
     # 4. A copied, edited task file and a folder of the user's own hole shapes, by path.
     holes = user["work"] / "my_holes"

@@ -141,7 +141,7 @@ class PegInsertEnv(BaseEnv):
         # A 2 mm contact offset (ManiSkill's default is 20 mm): with 20 mm, PhysX's
         # speculative contacts between the peg's bottom face and the hole's rim pushed back
         # a perfectly centred peg; a 2 mm offset still catches 10 mm/s at 500 Hz.
-        # Tight-fit tasks use half their clearance and switch PCM off (TaskConfig's
+        # Tight-fit tasks use half their clearance; PCM is off everywhere (TaskConfig's
         # contact_offset and pcm say why). 40 position iterations (ManiSkill's 15 let a
         # peg the insertion pressed into the floor at a slight tilt sink 0.06-0.09 mm into
         # a wall; the episode's wall time did not change).

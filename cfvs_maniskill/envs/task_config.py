@@ -56,11 +56,11 @@ class TaskConfig:
     """45-degree chamfer on the peg's tip edges, metres (0: the paper's sharp-edged peg).
     Tight fits use one, as real parts do: the tip then starts into the hole with that much
     more lateral / yaw error and the chamfer guides it in."""
-    pcm: bool = True
-    """PhysX's persistent contact manifold (its default contact generation). Tight fits turn
-    it off for exact per-step contacts: at 1 mm it kept stale contacts on both rim edges
-    that held a peg with 0.4 mm of free play on each side (re-placed, the same pose had
-    none), which was most of the 1 mm failures."""
+    pcm: bool = False
+    """PhysX's persistent contact manifold (PhysX's default contact generation). Off: exact
+    per-step contacts. With it, a peg pressed into a 4 mm hole's floor at a slight tilt sank
+    0.06-0.15 mm into a wall, and at 1 mm it kept stale contacts on both rim edges that held
+    a peg with 0.4 mm of free play on each side (re-placed, the same pose had none)."""
     contact_offset: Annotated[float, Field(gt=0.0, le=0.02)] | None = None
     """PhysX contact offset of every collision shape, metres: shape pairs closer than the sum
     of their offsets get contacts. Unset: 2 mm (it catches the peg's fastest approach at

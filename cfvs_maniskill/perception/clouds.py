@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cfvs_maniskill.constants import PEG_LENGTH, peg_half_extent
+from cfvs_maniskill.geometry import robust_sigma
 
 TABLE_BAND = 0.02
 """The table plane is fitted to points within this height of its nominal top (z = 0): a
@@ -107,7 +108,7 @@ def _fit_table(world: np.ndarray, min_points: int) -> tuple[TableFit, tuple[int,
         scale = np.sqrt(a * a + b * b + 1.0)
         normal, offset = np.array([-a, -b, 1.0]) / scale, c / scale
         r = band @ normal - offset
-        sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-5)
+        sigma = max(robust_sigma(r), 1e-5)
         inliers = np.abs(r) < 3 * sigma
         if i == 2 or (kept is not None and np.array_equal(inliers, kept)):
             break  # no next pass, or it would fit the same points to the same plane

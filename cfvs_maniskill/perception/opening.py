@@ -34,7 +34,7 @@ from itertools import combinations
 
 import numpy as np
 
-from cfvs_maniskill.geometry import angle_deg
+from cfvs_maniskill.geometry import angle_deg, robust_sigma
 
 LEVEL_BAND = (0.001, 0.006)
 """The face's level is measured on the points this far outside the estimated opening's
@@ -75,6 +75,9 @@ MAX_SHIFT = 0.006
 else's edge, and not used."""
 MAX_TURN_DEG = 6.0
 """... or turning the square further than this."""
+CIRCLE_WALL_BAND = WALL_NEAR + SEARCH / 2
+"""A round opening's wall points lie within this of the nominal radius round the estimate
+(its edge near where it should be, the estimate half a search off)."""
 SECTORS = 24
 """A round opening's edge is measured in this many equal sectors round the estimate ..."""
 MIN_SECTORS = 8
@@ -196,7 +199,7 @@ def face_level(h: np.ndarray) -> tuple[float, float]:
     for _ in range(3):
         near = h[np.abs(h - level) < window]
         level = float(np.median(near))
-        sigma = 1.4826 * float(np.median(np.abs(near - level)))
+        sigma = robust_sigma(near, level)
         window = max(0.003, 3.0 * sigma)
     return level, sigma
 
@@ -287,7 +290,7 @@ def _circle(face: np.ndarray, wall: np.ndarray, radius: float):
     fit = _sector_circle(face, wall, radius)
     if fit is not None:
         return fit
-    near = wall[np.abs(np.linalg.norm(wall[:, :2], axis=1) - radius) < WALL_NEAR + SEARCH / 2]
+    near = wall[np.abs(np.linalg.norm(wall[:, :2], axis=1) - radius) < CIRCLE_WALL_BAND]
     return _wall_circle(near[:, :2], radius) if len(near) >= MIN_CIRCLE_WALL else None
 
 
@@ -306,7 +309,7 @@ def _wall_circle(p: np.ndarray, radius: float):
         sw = np.sqrt(w)
         c = c + np.linalg.lstsq(d / rho[:, None] * sw[:, None], (rho - radius) * sw, rcond=None)[0]
         res = np.linalg.norm(p - c, axis=1) - radius
-        scale = max(WALL_MIN_SCALE, 1.4826 * float(np.median(np.abs(res - np.median(res)))))
+        scale = max(WALL_MIN_SCALE, robust_sigma(res))
         w = (1.0 - np.clip(res / (4.685 * scale), -1.0, 1.0) ** 2) ** 2
     d = p[w > 0] - c
     dirs = d / np.linalg.norm(d, axis=1)[:, None]
@@ -334,7 +337,7 @@ def _sector_circle(face: np.ndarray, wall: np.ndarray, radius: float):
             in_sector = np.abs((a - mid + np.pi) % (2 * np.pi) - np.pi) < width / 2
             rho = dist[in_sector]
             if kind:
-                rho = rho[np.abs(rho - radius) < WALL_NEAR + SEARCH / 2]
+                rho = rho[np.abs(rho - radius) < CIRCLE_WALL_BAND]
                 if len(rho) < MIN_SECTOR_WALL:
                     continue
                 edge = float(np.median(rho))
@@ -386,6 +389,6 @@ def _line_slope(x: np.ndarray, y: np.ndarray) -> float:
         dx = x[keep] - xm
         slope = float(dx @ (y[keep] - ym) / max(float(dx @ dx), 1e-12))
         res = y - ym - slope * (x - xm)
-        sigma = 1.4826 * np.median(np.abs(res[keep])) + 1e-9
+        sigma = robust_sigma(res[keep], 0.0) + 1e-9
         keep = np.abs(res) < 3 * sigma
     return slope

@@ -85,7 +85,7 @@ def peg_correction(
         step = np.linalg.solve(A, -J.T @ r)
         dT = G.make(Rotation.from_rotvec(step[:3]).as_matrix(), step[3:])
         T = dT @ T
-        sigma = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+        sigma = G.robust_sigma(r)
         band = max(INLIER_SIGMAS * sigma, MIN_INLIER_BAND)
         if np.linalg.norm(step[3:]) < 1e-6 and np.linalg.norm(step[:3]) < 1e-5:
             break

@@ -280,12 +280,12 @@ class CFVSAgent(Agent):
         if self.cfg.calibration:
             camera = tcp.copy()  # the tool's axes serve: the camera is fixed to the tool
             camera[:3, 3] = tcp[:3, :3] @ self.task.camera_in_tcp() + tcp[:3, 3]
-            if self.stage == "coarse":  # most of the table in sight, nothing near the peg
+            coarse = self.stage == "coarse"  # most of the table in sight, nothing near the peg
+            if coarse:
                 self.correction = correction_from_table(world, camera) or IDENTITY
-                world = self.correction.apply(world.astype(np.float64), camera)
+            world = self.correction.apply(world.astype(np.float64), camera)
+            if coarse:
                 self.peg_fix = peg_correction(world, tcp, self.peg, self.task.peg_chamfer)
-            else:
-                world = self.correction.apply(world.astype(np.float64), camera)
             world = apply_correction(self.peg_fix, world, tcp)
         return world
 

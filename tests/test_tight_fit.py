@@ -222,15 +222,16 @@ def test_tight_fit_contact_model(make_env):
 
 @pytest.mark.slow
 def test_true_pose_goes_in_where_contacts_held_it(make_env):
-    """The true pre-insertion pose, 0.5 mm clearance, on four scenes where it once stopped
-    1.7 mm into the entry (centred within 0.06 mm): with a 2 mm contact offset PhysX
-    reported the peg's chamfer touching at the hole's corners, 0.25 mm from any wall, and
-    the spiral search dragged the peg off. The task's offset (half the clearance) lets all
-    four in; the scene's shapes carry it."""
+    """The true pre-insertion pose, 0.5 mm clearance, on seven scenes where it once stopped
+    1.7 mm into the entry (centred within 0.06 mm): PhysX reported the peg's chamfer, its
+    plane extended, touching the hole's corners while the walls were 0.25 mm away, and the
+    spiral search dragged the peg off. With a 2 mm contact offset all of the first four
+    stopped; with half the clearance (the task's, carried by the scene's shapes) the last
+    four still did at times, until a peg that stalls backs off and pushes again."""
     env = make_env(TIGHT, obs_mode="state")
     u = env.unwrapped
     oracle, ex = OracleAgent(env), Executor(env)
-    for seed in (11, 20, 22, 25):
+    for seed in (11, 20, 22, 25, 108, 120, 154):
         r = run_episode(env, oracle, ex, seed=seed)
         assert r.success, (seed, r.reason)
     peg = u.agent.robot.links_map["peg"]._objs[0]

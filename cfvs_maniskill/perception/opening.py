@@ -10,20 +10,22 @@ ones leaves it 1-3 mm and 1-3 deg (yaw) off, which a 0.5 mm clearance does not f
 
 Here (in the estimated hole frame, the axis from the rim fit): the face's level is the
 densest flat part of a ring just outside the opening (so the band that counts as face
-follows the sensor's noise); each side is where the face begins (the half-density point
-of the face's points across the side: noise blurs an edge evenly both ways), or, where
-the camera sees that side's wall, the wall's own points (noise lifts a seen wall's top
-into the face's band, inside the edge). The centre is midway between two opposite sides
-of the same kind; on the axis the camera looks along, where only the far wall is seen (a
-face edge opposite it is the peg's shadow), it is the nominal half width from that wall,
-less how much narrower than nominal the two side walls look (measured in the same view:
-the simulated camera puts walls ~0.6 mm inside, and a real one has its own error). The
-yaw is the walls' mean slope. A round opening's centre is a least-squares circle of its
-known radius through the edge seen in each sector round it (the face's edge, or the wall's
-points where the wall is seen), with how much narrower the walls look than the face's edge
-as one more unknown, and sectors far off the circle (the peg's shadow) left out; where the
-cloud is too sparse for an edge per sector (a passive stereo camera on a plain part), the
-circle through the wall's own points. Measured on 42 wrist views of the 0.5 mm task (ideal sensor,
+follows the sensor's noise); each side is where the face begins (the half-density point of
+the face's points across the side: noise blurs an edge evenly both ways; in a cloud too
+sparse for that, as a passive stereo camera's on a plain part, its innermost point with a
+neighbour), or, where the camera sees that side's wall, the wall's own points (noise lifts
+a seen wall's top into the face's band, inside the edge). The centre is midway between two
+opposite sides of the same kind; on the axis the camera looks along, where only the far
+wall is seen (a face edge opposite it is the peg's shadow), it is the nominal half width
+from that wall, less how much narrower than nominal the two side walls look (measured in
+the same view: the simulated camera puts walls ~0.6 mm inside, and a real one has its own
+error; with no two walls in view, none). The yaw is the walls' mean slope. A round
+opening's centre is a least-squares circle of its known radius through the edge seen in
+each sector round it (the face's edge, or the wall's points where the wall is seen), with
+how much narrower the walls look than the face's edge as one more unknown, and sectors far
+off the circle (the peg's shadow) left out; where the cloud is too sparse for an edge per
+sector (a passive stereo camera on a plain part), the circle through the wall's own points.
+Measured on 42 wrist views of the 0.5 mm task (ideal sensor,
 test and held-out objects): lateral error p50 / p90 1.26 / 2.61 -> 0.35 / 0.86 mm, yaw
 0.83 / 2.02 -> 0.19 / 0.55 deg (docs/cfvs.md).
 """
@@ -61,7 +63,12 @@ EDGE_BIN = 0.0005
 EDGE_RUN = 3
 """... the first run of this many bins at half the density further out."""
 MIN_EDGE_POINTS = 3
-"""A side with fewer face points per bin than this (at its plateau) is not used."""
+"""A side with fewer face points per bin than this (at its plateau) is too sparse for the
+density profile; a square's side then ..."""
+SPARSE_EDGE_GAP = 0.002
+"""... begins at its innermost face point with another within this further out (a passive
+stereo camera on a plain part puts 6-30 points along a side, 1-4 mm apart; a lone point
+further in is a stray)."""
 WALL_DEPTH = 0.04
 """The wall: points down to this far below the face (not the hole's floor) ..."""
 WALL_NEAR = 0.003
@@ -224,6 +231,15 @@ def edge_crossing(inward: np.ndarray, half: float) -> float | None:
     return half + float(lo[i]) + EDGE_BIN * (1.0 - fill)
 
 
+def _sparse_edge(inward: np.ndarray, half: float) -> float | None:
+    """Where a sparse face begins along one side: its innermost point that has another
+    within SPARSE_EDGE_GAP further out. Noise moves points both ways across the edge, so
+    the two sides of an opening share the error and their midpoint keeps the centre."""
+    u = np.sort(inward[inward > half - SEARCH])
+    close = np.flatnonzero(np.diff(u) < SPARSE_EDGE_GAP)
+    return float(u[close[0]]) if len(u) >= MIN_EDGE_POINTS and len(close) else None
+
+
 def _square(face: np.ndarray, wall: np.ndarray, half: float):
     """((cx, cy), yaw) of a square opening from the face points `face` and the points below
     the face `wall` (its frame), or None."""
@@ -237,6 +253,7 @@ def _square(face: np.ndarray, wall: np.ndarray, half: float):
             v = face[:, other]  # ... and position along the side
             on = (u > half - SEARCH) & (np.abs(v) < half - CORNER)
             edge = edge_crossing(u[on], half)
+            edge = _sparse_edge(u[on], half) if edge is None else edge
             # Where the camera sees this side's wall, noise lifts the wall's top into the
             # face's band, inside the edge: the wall's own points say where it is.
             wu, wv = sign * wall[:, axis], wall[:, other]
@@ -255,12 +272,13 @@ def _square(face: np.ndarray, wall: np.ndarray, half: float):
     if not sides:
         return None
     # How much narrower the walls look than the nominal opening, from an axis with both
-    # walls in view (the cloud's own error at walls, the same on every wall).
+    # walls in view (the cloud's own error at walls, the same on every wall); with none,
+    # the walls are where the camera puts them (a stereo cloud's far wall: 0.1 mm inside).
     narrowing = [
         half - (sides[a, 1.0][0] + sides[a, -1.0][0]) / 2
         for a in (0, 1)
         if (a, 1.0) in sides and (a, -1.0) in sides and sides[a, 1.0][1] and sides[a, -1.0][1]
-    ]
+    ] or [0.0]
     for axis in (0, 1):
         plus, minus = sides.get((axis, 1.0)), sides.get((axis, -1.0))
         # Both sides the same kind: a face edge beside a wall may be the edge of the peg's
@@ -274,7 +292,7 @@ def _square(face: np.ndarray, wall: np.ndarray, half: float):
         # opening's nominal half width beyond it, less the narrowing measured across the
         # other axis.
         walls = [(sg, s[0]) for sg, s in ((1.0, plus), (-1.0, minus)) if s is not None and s[1]]
-        if len(walls) == 1 and narrowing:
+        if len(walls) == 1:
             sg, at = walls[0]
             centre[axis] = sg * (at - (half - float(np.mean(narrowing))))
     yaw = float(np.average(slopes, weights=weights)) if weights else 0.0

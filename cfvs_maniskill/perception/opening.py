@@ -25,9 +25,9 @@ each sector round it (the face's edge, or the wall's points where the wall is se
 how much narrower the walls look than the face's edge as one more unknown, and sectors far
 off the circle (the peg's shadow) left out; where the cloud is too sparse for an edge per
 sector (a passive stereo camera on a plain part), the circle through the wall's own points.
-Measured on 42 wrist views of the 0.5 mm task (ideal sensor,
-test and held-out objects): lateral error p50 / p90 1.26 / 2.61 -> 0.35 / 0.86 mm, yaw
-0.83 / 2.02 -> 0.19 / 0.55 deg (docs/cfvs.md).
+Measured on 42 wrist views of the 0.5 mm task (ideal sensor, test and held-out objects):
+lateral error p50 / p90 1.26 / 2.61 -> 0.35 / 0.86 mm, yaw 0.83 / 2.02 -> 0.19 / 0.55 deg
+(docs/cfvs.md).
 """
 
 from __future__ import annotations

@@ -233,8 +233,10 @@ def edge_crossing(inward: np.ndarray, half: float) -> float | None:
 
 def _sparse_edge(inward: np.ndarray, half: float) -> float | None:
     """Where a sparse face begins along one side: its innermost point that has another
-    within SPARSE_EDGE_GAP further out. Noise moves points both ways across the edge, so
-    the two sides of an opening share the error and their midpoint keeps the centre."""
+    within SPARSE_EDGE_GAP further out; None with fewer than MIN_EDGE_POINTS points in all
+    (the same count as a dense side's per bin). Noise moves points both ways across the
+    edge, so the two sides of an opening share the error and their midpoint keeps the
+    centre."""
     u = np.sort(inward[inward > half - SEARCH])
     close = np.flatnonzero(np.diff(u) < SPARSE_EDGE_GAP)
     return float(u[close[0]]) if len(u) >= MIN_EDGE_POINTS and len(close) else None

@@ -492,6 +492,35 @@ def test_grooved_family_cuts_grooves_beside_the_hole_and_is_held_out(tmp_path, m
         procedural_specs(2, 1, "square", 0.004, 0.045, "grooved")
 
 
+def test_fixture_features_stand_where_they_say_and_the_family_is_held_out():
+    """`fixtures` (release 1.1.0's frozen set): a bolt circle drills evenly spaced holes
+    round the opening, pins stand on the face and never off its edge, a ramp's face slopes;
+    none touches the opening's wall, and training never draws the family."""
+    from cfvs_maniskill.data import shapes as S
+    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
+
+    keep, top = S.keep_clear("square", 0.004), 0.05
+    plate = S.box_at([0.2, 0.2, top], [0, 0, top / 2])
+    hole = np.array([0.085, 0.0])  # near an edge: pins beyond it would float
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        drilled, _ = S.add_bolt_circle(rng, plate, hole, top, keep)
+        drill = np.pi * (0.3 * (keep - 0.002)) ** 2 * 0.01  # the smallest hole's volume
+        assert drilled.volume < plate.volume - 2 * drill, seed  # a half circle at least
+        pinned, _ = S.add_pins(np.random.default_rng(seed), plate, hole, top, keep)
+        tall = pinned.vertices[pinned.vertices[:, 2] > top + 0.01]
+        assert len(tall) and np.all(np.abs(tall[:, :2]) <= 0.1 + 1e-6), seed  # on the face
+        ramp, _ = S.add_ramp(np.random.default_rng(seed), plate, hole, top, keep)
+        n = ramp.face_normals
+        assert np.any((np.abs(n[:, 2]) > 0.2) & (np.abs(n[:, 2]) < 0.995)), seed  # a slope
+        for body in (drilled, pinned, ramp):
+            near = np.linalg.norm(body.vertices[:, :2] - hole, axis=1) < keep
+            assert not near.any(), seed  # the opening's wall stays whole
+    assert "fixtures" not in TRAINING_FAMILIES
+    with pytest.raises(ValueError, match="held out of training"):
+        procedural_specs(2, 1, "square", 0.004, 0.045, "fixtures")
+
+
 def test_a_dataset_can_be_collected_on_another_mount_than_the_profiles():
     """`--mount NAME` puts the camera on a named mount for every scene of the file (KOVIS's
     own mount given way to), and the file says so (a resume must match it)."""

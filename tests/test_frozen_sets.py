@@ -15,6 +15,7 @@ FROZEN_RESULTS = (
     "results/generalisation",
     "results/generalisation_grooved",
     "results/generalisation_plates",
+    "results/generalisation_fixtures",
 )
 """The results folders of the frozen sets (assets/final, assets/generalisation*)."""
 

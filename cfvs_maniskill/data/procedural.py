@@ -205,6 +205,7 @@ FAMILIES = {
     "composite": "c",
     "grooved": "g",
     "plates": "l",
+    "fixtures": "x",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

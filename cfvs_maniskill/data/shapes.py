@@ -13,7 +13,11 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   Held out too: the successor frozen set (`assets/generalisation_grooved/`) is made of it;
 - `plates`: plates up to 30 cm wide, the opening far from their centre, with a wall or a
   step 1-4 cm beside it, the opening on a small island, or decoy openings of other sizes.
-  Held out: the next release's frozen set (`assets/generalisation_plates/`) is made of it.
+  Held out: release 1.0.0's frozen set (`assets/generalisation_plates/`) is made of it.
+- `fixtures`: fixture plates and flanges up to 28 cm, the opening anywhere on the face,
+  with two or three of: a bolt circle of small drilled holes round the opening, dowel pins
+  or posts standing beside it, a ramp rising beside it, a wall, a step down, an island.
+  Held out: release 1.1.0's frozen set (`assets/generalisation_fixtures/`) is made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -335,6 +339,87 @@ def plate_body(rng, peg, clearance, folder: Path, name: str):
     return _write(mesh, hole, top, folder, name)
 
 
+def add_bolt_circle(rng, mesh, hole, top, keep):
+    """Four to eight drilled holes, 0.3-0.7 times the opening's half width, 1-2.5 cm deep,
+    evenly on a circle round the opening 6-25 mm outside its wall (those on the face)."""
+    half = keep - MIN_WALL
+    r = half * rng.uniform(0.3, 0.7)
+    ring = keep + r + rng.uniform(0.006, 0.025)
+    n, turn, d = int(rng.integers(4, 9)), rng.uniform(0, 2 * np.pi), rng.uniform(0.01, 0.025)
+    cuts = []
+    for k in range(n):
+        c = hole + _unit(turn + 2 * np.pi * k / n) * ring
+        if not _solid_under(mesh, c, r, top):
+            continue  # off the face's edge: a partial pattern, as near a real part's edge
+        cut = trimesh.creation.cylinder(r, 2 * d, 32)
+        cut.apply_translation([*c, top])
+        cuts.append(cut)
+    return _minus(mesh, cuts), top
+
+
+def _solid_under(mesh: trimesh.Trimesh, centre, half: float, top: float) -> bool:
+    """Whether the body fills the square of half side `half` round `centre` (x, y) in the
+    millimetre below `top`: a footprint wholly on the face."""
+    probe = box_at([2 * half, 2 * half, 0.001], [*centre, top - 0.0005])
+    with np.errstate(invalid="ignore", divide="ignore"):  # an empty intersection's centre
+        solid = trimesh.boolean.intersection([mesh, probe], engine="manifold").volume
+    return solid > 0.99 * probe.volume
+
+
+def add_pins(rng, mesh, hole, top, keep):
+    """One to three dowel pins or posts (3-10 mm radius, 1.5-6 cm tall) standing 1-4 cm
+    from the opening's wall."""
+    pins, wanted = [], int(rng.integers(1, 4))
+    for _ in range(8 * wanted):
+        r, h = rng.uniform(0.003, 0.01), rng.uniform(0.015, 0.06)
+        c = hole + _unit(rng.uniform(0, 2 * np.pi)) * (keep + r + rng.uniform(0.01, 0.04))
+        if not _solid_under(mesh, c, r, top):
+            continue  # a pin stands on the face, never beyond its edge or in a cut
+        pin = trimesh.creation.cylinder(r, h + 0.002, 48)
+        pin.apply_translation([*c, top + h / 2 - 0.001])
+        pins.append(pin)
+        if len(pins) == wanted:
+            break
+    return _union([mesh, *pins]), top
+
+
+def add_ramp(rng, mesh, hole, top, keep):
+    """A wedge beside the opening: its low edge 5-30 mm from the opening's wall, rising
+    1-4 cm over 3-8 cm, 4-15 cm wide: a sloped face next to a flat one."""
+    side = rng.uniform(0, 2 * np.pi)
+    gap, run, rise = rng.uniform(0.005, 0.03), rng.uniform(0.03, 0.08), rng.uniform(0.01, 0.04)
+    width = rng.uniform(0.04, 0.15)
+    a, b = keep + gap, keep + gap + run  # along `side` from the hole
+    z0, z1 = top - 0.001, top + rise
+    ends = [(a, z0), (b, z0), (b, z1)]  # the wedge's section, extruded across its width
+    u, v = _unit(side), _unit(side + np.pi / 2)
+    corners = [[*(hole + u * x + v * w), z] for x, z in ends for w in (-width / 2, width / 2)]
+    wedge = trimesh.convex.convex_hull(np.array(corners))
+    return _union([mesh, wedge]), top
+
+
+FIXTURE_FEATURES = (add_bolt_circle, add_pins, add_ramp, add_wall, add_drop, add_island)
+
+
+def fixture_body(rng, peg, clearance, folder: Path, name: str):
+    """A fixture plate (12-28 cm) or a flange (a disc 12-28 cm across), 3-7 cm thick, the
+    opening anywhere on the face, with two or three of `FIXTURE_FEATURES`."""
+    keep = keep_clear(peg, clearance)
+    top = rng.uniform(0.03, 0.07)
+    if rng.random() < 0.5:
+        sx, sy = rng.uniform(0.12, 0.28, size=2)
+        mesh = box_at([sx, sy, top], [0, 0, top / 2])
+        hole = (np.array([sx, sy]) / 2 - keep) * rng.uniform(-0.95, 0.95, size=2)
+    else:
+        r = rng.uniform(0.06, 0.14)
+        mesh = trimesh.creation.cylinder(r, top, 128)
+        mesh.apply_translation([0, 0, top / 2])
+        hole = _unit(rng.uniform(0, 2 * np.pi)) * (r - keep) * np.sqrt(rng.uniform(0, 0.9))
+    for add in rng.choice(FIXTURE_FEATURES, size=int(rng.integers(2, 4)), replace=False):
+        mesh, top = add(rng, mesh, hole, top, keep)
+    return _write(mesh, hole, top, folder, name)
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
@@ -342,6 +427,7 @@ FAMILIES: dict[str, Draw] = {
     "composite": composite_body,
     "grooved": grooved_body,
     "plates": plate_body,
+    "fixtures": fixture_body,
 }
-HELD_OUT_FAMILIES = ("composite", "grooved", "plates")
+HELD_OUT_FAMILIES = ("composite", "grooved", "plates", "fixtures")
 """Never drawn for training: the frozen generalisation sets' families."""

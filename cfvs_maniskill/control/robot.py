@@ -75,6 +75,7 @@ class SimRobot:
         return self.env.ik(T, seed)
 
     def command(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
+        self._check_finite()  # PhysX with exact contacts crashes when stepped from NaN
         if self.env.control_mode == "pd_joint_pos_vel":
             qd = np.zeros_like(q) if qd is None else qd
             action = torch.as_tensor(np.concatenate([q, qd]), dtype=torch.float32)[None]
@@ -85,7 +86,14 @@ class SimRobot:
             _, _, _, _, self.last_info = self.gym_env.step(action)
         finally:
             self.env.defer_obs = False
-        if not np.all(np.isfinite(self.joints())):
+        self._check_finite()
+
+    def _check_finite(self) -> None:
+        robot = self.env.agent.robot
+        state = np.concatenate(
+            [robot.get_qpos()[0].cpu().numpy(), robot.get_qvel()[0].cpu().numpy()]
+        )
+        if not np.all(np.isfinite(state)):
             raise FloatingPointError("simulation state became NaN")
 
     def tare(self) -> None:

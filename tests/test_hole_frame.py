@@ -103,24 +103,13 @@ def _assert_open_hole(g):
 @pytest.mark.parametrize(
     ("frame", "field", "words"),
     [
+        # Fields the file gets wrong, refused when it is read:
         ("{origin: [-40, 0, 60]}", "hole_frame.axis", "missing"),
         ("{origin: [-40, 0, 60], axis: [0, 0, 0]}", "hole_frame.axis", "non-zero"),
         ("{origin: [-40, 0], axis: [0, 0, 1]}", "hole_frame.origin", "list of 3"),
         ("{origin: [-40, 0, 60], axis: [0, 0, 1], up: 1}", "hole_frame.up", "unknown"),
         ("[0, 0, 1]", "hole_frame", "mapping"),
-    ],
-)
-def test_bad_hole_frame_fields_are_named(tmp_path, frame, field, words):
-    _boss_part(tmp_path)
-    p = _write(tmp_path, f"body:\n  mesh: {{file: boss.stl, scale: 0.001}}\nhole_frame: {frame}\n")
-    with pytest.raises(HoleSpecError, match=words) as e:
-        load_spec(p)
-    assert str(p) in str(e.value) and f"'{field}'" in str(e.value)
-
-
-@pytest.mark.parametrize(
-    ("frame", "field", "words"),
-    [
+        # Frames off the part, refused when the geometry is built:
         # 5 mm above the base's face: not on any face.
         ("{origin: [-40, 0, 65], axis: [0, 0, 1]}", "hole_frame.origin", "5.0 mm from"),
         # The base's face with the axis pointing into the part.
@@ -131,7 +120,8 @@ def test_bad_hole_frame_fields_are_named(tmp_path, frame, field, words):
         ("{origin: [70, 0, 100], axis: [0, 0, 1]}", "body.mesh.file", "mm missing"),
     ],
 )
-def test_hole_frame_off_the_part_says_what_is_wrong(tmp_path, frame, field, words):
+def test_a_bad_hole_frame_says_what_is_wrong(tmp_path, frame, field, words):
+    """A wrong field or a frame off the part: the error names the file and the field."""
     _boss_part(tmp_path)
     p = _write(tmp_path, f"body:\n  mesh: {{file: boss.stl, scale: 0.001}}\nhole_frame: {frame}\n")
     with pytest.raises(HoleSpecError, match=words) as e:

@@ -9,6 +9,7 @@ import pytest
 import trimesh
 
 from cfvs_maniskill.constants import DEFAULT_CLEARANCE, DEFAULT_HOLE_DEPTH, PEG_LENGTH, PROJECT_ROOT
+from cfvs_maniskill.data.shapes import box_at
 from cfvs_maniskill.objects.build import (
     build_geometry,
     check_room,
@@ -30,12 +31,8 @@ def _write(tmp_path, text: str, name: str = "part.yaml"):
 def _boss_part(folder):
     """A 200 x 140 x 60 mm base with a 40 mm boss on top at one end (in millimetres):
     the body's global top is the boss, too small for the hole."""
-    base = trimesh.creation.box([200, 140, 60])
-    base.apply_translation([0, 0, 30])
-    boss = trimesh.creation.box([50, 50, 40])
-    boss.apply_translation([70, 0, 80])
-    part = trimesh.boolean.union([base, boss], engine="manifold")
-    part.export(folder / "boss.stl")
+    boxes = [box_at([200, 140, 60], [0, 0, 30]), box_at([50, 50, 40], [70, 0, 80])]
+    trimesh.boolean.union(boxes, engine="manifold").export(folder / "boss.stl")
 
 
 def test_bundled_cad_parts_validate_outside_the_default_library():

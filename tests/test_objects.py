@@ -13,6 +13,7 @@ from cfvs_maniskill.constants import (
     hole_half_extent,
     peg_half_extent,
 )
+from cfvs_maniskill.data.shapes import box_at
 from cfvs_maniskill.objects.build import build_geometry, cache_dir, hole_solid
 from cfvs_maniskill.objects.library import load_library
 
@@ -86,12 +87,8 @@ def test_mesh_body_goes_through_coacd(tmp_path):
     import trimesh
 
     # An L-shaped bracket in millimetres: concave, so it needs a real decomposition.
-    a = trimesh.creation.box([150, 120, 70])
-    a.apply_translation([0, 0, 35])
-    b = trimesh.creation.box([40, 120, 60])
-    b.apply_translation([95, 0, 30])
-    bracket = trimesh.boolean.union([a, b], engine="manifold")
-    bracket.export(tmp_path / "bracket.stl")
+    boxes = [box_at([150, 120, 70], [0, 0, 35]), box_at([40, 120, 60], [95, 0, 30])]
+    trimesh.boolean.union(boxes, engine="manifold").export(tmp_path / "bracket.stl")
     (tmp_path / "bracket.yaml").write_text(
         "split: test\nbody:\n  mesh: {file: bracket.stl, scale: 0.001}\nhole_at: [-0.02, 0.0]\n"
     )

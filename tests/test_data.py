@@ -492,10 +492,12 @@ def test_grooved_family_cuts_grooves_beside_the_hole_and_is_held_out(tmp_path, m
         procedural_specs(2, 1, "square", 0.004, 0.045, "grooved")
 
 
-def test_fixture_features_stand_where_they_say_and_the_family_is_held_out():
+def test_fixture_features_stand_where_they_say_and_the_family_is_held_out(tmp_path):
     """`fixtures` (release 1.1.0's frozen set): a bolt circle drills evenly spaced holes
     round the opening, pins stand on the face and never off its edge, a ramp's face slopes;
     none touches the opening's wall, and training never draws the family."""
+    import trimesh
+
     from cfvs_maniskill.data import shapes as S
     from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
 
@@ -516,6 +518,11 @@ def test_fixture_features_stand_where_they_say_and_the_family_is_held_out():
         for body in (drilled, pinned, ramp):
             near = np.linalg.norm(body.vertices[:, :2] - hole, axis=1) < keep
             assert not near.any(), seed  # the opening's wall stays whole
+    for seed in (1, 9):  # these draw an island before pins, a wall: they stand on the face
+        drawn = S.fixture_body(np.random.default_rng(seed), "square", 0.004, tmp_path, "f")
+        assert drawn is not None, seed
+        body = trimesh.load(tmp_path / "f.stl")
+        assert len(body.split(only_watertight=False)) == 1, seed
     assert "fixtures" not in TRAINING_FAMILIES
     with pytest.raises(ValueError, match="held out of training"):
         procedural_specs(2, 1, "square", 0.004, 0.045, "fixtures")

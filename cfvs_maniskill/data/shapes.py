@@ -403,7 +403,8 @@ FIXTURE_FEATURES = (add_bolt_circle, add_pins, add_ramp, add_wall, add_drop, add
 
 def fixture_body(rng, peg, clearance, folder: Path, name: str):
     """A fixture plate (12-28 cm) or a flange (a disc 12-28 cm across), 3-7 cm thick, the
-    opening anywhere on the face, with two or three of `FIXTURE_FEATURES`."""
+    opening anywhere on the face, with two or three of `FIXTURE_FEATURES` (an island last:
+    what stands beside the opening stands on the face, not at the island's height)."""
     keep = keep_clear(peg, clearance)
     top = rng.uniform(0.03, 0.07)
     if rng.random() < 0.5:
@@ -415,8 +416,11 @@ def fixture_body(rng, peg, clearance, folder: Path, name: str):
         mesh = trimesh.creation.cylinder(r, top, 128)
         mesh.apply_translation([0, 0, top / 2])
         hole = _unit(rng.uniform(0, 2 * np.pi)) * (r - keep) * np.sqrt(rng.uniform(0, 0.9))
-    for add in rng.choice(FIXTURE_FEATURES, size=int(rng.integers(2, 4)), replace=False):
+    chosen = rng.choice(FIXTURE_FEATURES, size=int(rng.integers(2, 4)), replace=False)
+    for add in sorted(chosen, key=lambda f: f is add_island):  # the rest stand on the face
         mesh, top = add(rng, mesh, hole, top, keep)
+    if len(mesh.split(only_watertight=False)) > 1:
+        return None  # a part not joined to the body (it would float): draw again
     return _write(mesh, hole, top, folder, name)
 
 

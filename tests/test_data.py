@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+from cfvs_maniskill.constants import MIN_WALL, PRE_INSERT_HEIGHT
 from cfvs_maniskill.data.augment import AugmentConfig, augment
 from cfvs_maniskill.data.collect import CollectArgs, collect
 from cfvs_maniskill.data.procedural import procedural_specs
@@ -507,7 +507,7 @@ def test_fixture_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
     for seed in range(4):
         rng = np.random.default_rng(seed)
         drilled, _ = S.add_bolt_circle(rng, plate, hole, top, keep)
-        drill = np.pi * (0.3 * (keep - 0.002)) ** 2 * 0.01  # the smallest hole's volume
+        drill = np.pi * (0.3 * (keep - MIN_WALL)) ** 2 * 0.01  # the smallest hole's volume
         assert drilled.volume < plate.volume - 2 * drill, seed  # a half circle at least
         pinned, _ = S.add_pins(np.random.default_rng(seed), plate, hole, top, keep)
         tall = pinned.vertices[pinned.vertices[:, 2] > top + 0.01]

@@ -9,6 +9,22 @@ import numpy as np
 from benchmarks.common import Figure, interleaved
 
 
+def _hold(u) -> np.ndarray:
+    """The pd_joint_pos_vel action that holds our arm where it is."""
+    q = u.agent.robot.get_qpos()[0].numpy()
+    return np.concatenate([q, np.zeros_like(q)])
+
+
+def _repeat(fn, times: int):
+    """`fn` called `times` times in a row, as one timed sample."""
+
+    def sample():
+        for _ in range(times):
+            fn()
+
+    return sample
+
+
 def step_ratio(steps: int = 100, rounds: int = 6) -> tuple[list[Figure], str]:
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401  (registers PegInsertionSide-v1)
@@ -22,18 +38,10 @@ def step_ratio(steps: int = 100, rounds: int = 6) -> tuple[list[Figure], str]:
     )
     theirs.reset(seed=0)
     u = ours.unwrapped
-    q = u.agent.robot.get_qpos()[0].numpy()
-    hold = np.concatenate([q, np.zeros_like(q)])  # pd_joint_pos_vel: hold the start pose
+    hold = _hold(u)
     zero = np.zeros(theirs.action_space.shape, dtype=np.float32)  # pd_joint_delta_pos
-
-    def run(env, action):
-        def f():
-            for _ in range(steps):
-                env.step(action)
-
-        return f
-
-    t = interleaved({"ours": run(ours, hold), "theirs": run(theirs, zero)}, rounds)
+    runs = {"ours": lambda: ours.step(hold), "theirs": lambda: theirs.step(zero)}
+    t = interleaved({k: _repeat(f, steps) for k, f in runs.items()}, rounds)
     n = steps * rounds
     ms = {k: 1000 * v / n for k, v in t.items()}
     sub = {k: e.unwrapped.sim_freq // e.unwrapped.control_freq for k, e in
@@ -120,15 +128,7 @@ def pointcloud_floor(rounds: int = 200) -> tuple[list[Figure], str]:
     u = env.unwrapped
     scene, cam = _bare_scene(u)
     render = _raw_render(scene, cam)
-    q = u.agent.robot.get_qpos()[0].numpy()
-    hold = np.concatenate([q, np.zeros_like(q)])  # pd_joint_pos_vel: hold the start pose
-
-    def ten(f):
-        def g():
-            for _ in range(10):
-                f()
-
-        return g
+    hold = _hold(u)
 
     def step_floor():
         state.step(hold)
@@ -137,7 +137,7 @@ def pointcloud_floor(rounds: int = 200) -> tuple[list[Figure], str]:
     # One observation at a time, alternating scenes as an episode does; steps in samples
     # of ten, each with its physics between the renders.
     timed = {"obs": u.get_obs, "render": render}
-    steps = {"step": ten(lambda: env.step(hold)), "step_floor": ten(step_floor)}
+    steps = {"step": _repeat(lambda: env.step(hold), 10), "step_floor": _repeat(step_floor, 10)}
     for f in (*timed.values(), *steps.values()):
         f()  # first frames: shader and pipeline set-up
     ms = {k: 1000 * v / rounds for k, v in interleaved(timed, rounds).items()}

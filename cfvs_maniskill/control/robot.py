@@ -86,14 +86,11 @@ class SimRobot:
             _, _, _, _, self.last_info = self.gym_env.step(action)
         finally:
             self.env.defer_obs = False
-        self._check_finite()
 
     def _check_finite(self) -> None:
-        robot = self.env.agent.robot
-        state = np.concatenate(
-            [robot.get_qpos()[0].cpu().numpy(), robot.get_qvel()[0].cpu().numpy()]
-        )
-        if not np.all(np.isfinite(state)):
+        """Before each step (a step that makes NaN is caught before the next one)."""
+        qvel = self.env.agent.robot.get_qvel()[0].cpu().numpy()
+        if not (np.all(np.isfinite(self.joints())) and np.all(np.isfinite(qvel))):
             raise FloatingPointError("simulation state became NaN")
 
     def tare(self) -> None:

@@ -194,14 +194,16 @@ def _ring_level(heights: np.ndarray, r: np.ndarray, half: float):
     return level, spread, seen
 
 
-def face_level(h: np.ndarray) -> tuple[float, float]:
-    """(level, noise sigma) of the face among heights `h` along the axis: the densest
-    millimetre, then the median and the robust spread of the points within a window that
-    grows to 3 sigmas. Beside the opening the ring also holds fins' and ribs' tops and,
-    where the estimate is off, the hole's wall; the face is the flat, dense part."""
-    counts, edges = np.histogram(h, bins=max(1, int(np.ptp(h) / 0.001) + 1))
-    i = int(np.argmax(counts))
-    level, window = (edges[i] + edges[i + 1]) / 2, 0.003
+def face_level(h: np.ndarray, start: float | None = None) -> tuple[float, float]:
+    """(level, noise sigma) of the face among heights `h` along the axis: from `start`
+    (None: the densest millimetre), the median and the robust spread of the points within
+    a window that grows to 3 sigmas. Beside the opening the ring also holds fins' and ribs'
+    tops and, where the estimate is off, the hole's wall; the face is the flat, dense part."""
+    if start is None:
+        counts, edges = np.histogram(h, bins=max(1, int(np.ptp(h) / 0.001) + 1))
+        i = int(np.argmax(counts))
+        start = float(edges[i] + edges[i + 1]) / 2
+    level, window = start, 0.003
     sigma = 0.0
     for _ in range(3):
         near = h[np.abs(h - level) < window]

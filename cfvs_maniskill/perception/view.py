@@ -32,6 +32,12 @@ put 12-450 there (most over 50) from 15-30 cm; a few flying pixels or a grazed e
 below."""
 
 
+AT_OPENING = 0.01
+"""`points_at_opening`: points within this of the opening's edge across the face ..."""
+AT_OPENING_DEPTH = 0.03
+"""... and within this of the face along the axis (its wall's top, a counterbore's floor)."""
+
+
 def sight_blockage(world: np.ndarray, camera: np.ndarray, hole: np.ndarray) -> int:
     """Points of `world` (K, 3) that reach the line from `camera` (3,) to the opening of
     hole frame `hole` (4x4, z out of the hole).
@@ -72,3 +78,15 @@ def clear_view_yaw(
     counts = [sight_blockage(world, P[:3, :3] @ camera_in_tcp + P[:3, 3], hole) for P in poses]
     clear = [i for i, n in enumerate(counts) if n < BLOCKED]
     return (clear[0] if clear else 0), counts
+
+
+def points_at_opening(
+    world: np.ndarray, hole: np.ndarray, half: float, round_opening: bool = False
+) -> int:
+    """How many points of `world` (K, 3) lie over the opening of hole frame `hole` and its
+    rim: within AT_OPENING of its edge (`half`: its nominal half width, or its radius with
+    `round_opening`) across the face and of the face along the axis. Behind a wall the
+    wrist camera sees the wall's back and none of these."""
+    q = (world - hole[:3, 3]) @ hole[:3, :3]
+    r = np.hypot(q[:, 0], q[:, 1]) if round_opening else np.abs(q[:, :2]).max(axis=1)
+    return int(np.count_nonzero((r < half + AT_OPENING) & (np.abs(q[:, 2]) < AT_OPENING_DEPTH)))

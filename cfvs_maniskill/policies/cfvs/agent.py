@@ -1,10 +1,13 @@
 """The CFVS agent (paper, Fig. 2): OAKN coarse move, OPN fine visual servoing, insertion.
 
 1. Coarse (open loop): OAKN votes the hole's keypoints from the wrist cloud; Algorithm 1
-   turns them into the hole frame; the peg moves to the pre-insertion pose above it.
+   turns them into the hole frame, which (beyond the paper, `opening_fit`) moves onto the
+   opening the cloud shows round it (perception/opening_search.py); the peg moves to the
+   pre-insertion pose above it.
 2. Fine (closed loop, Algorithm 2): OPN reads the cloud cropped around the end-effector and
    returns the offset (dt, dr) to the pre-insertion pose; the peg moves by it; repeat until
-   the offset is below (e_t, e_r) or `max_fine_iterations` is reached. In 6-DoF (beyond
+   the offset is below (e_t, e_r) or `max_fine_iterations` is reached. A look that does not
+   show the estimated opening (behind a wall) is not used (`look_again`). In 6-DoF (beyond
    the paper, `rim_plane`) the offset's tilt is replaced by the normal of the face around
    the opening OPN points at (perception/rim.py): OPN gives where the hole is, the face
    gives its axis (3- and 4-DoF holes are upright); the opening seen on that face then
@@ -39,11 +42,12 @@ from cfvs_maniskill.perception.clouds import (
     world_object_points,
 )
 from cfvs_maniskill.perception.opening import face_height, fit_opening
+from cfvs_maniskill.perception.opening_search import search_opening
 from cfvs_maniskill.perception.peg import apply as apply_correction
 from cfvs_maniskill.perception.peg import peg_correction
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
 from cfvs_maniskill.perception.table_calibration import IDENTITY, correction_from_table
-from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw
+from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw, points_at_opening
 from cfvs_maniskill.policies.base import Action, Agent, Observation
 from cfvs_maniskill.policies.cfvs.config import CFVSConfig
 from cfvs_maniskill.policies.cfvs.oakn import keypoint_spread, weighted_keypoints
@@ -52,6 +56,11 @@ from cfvs_maniskill.policies.networks import load_weights
 from cfvs_maniskill.task_dof import constrain
 from cfvs_maniskill.validation import read_yaml
 
+MIN_AT_OPENING = 20
+"""A fine look is used only if it shows at least this many points over the estimated
+opening and its rim (`points_at_opening`): behind a wall the camera sees the wall's back,
+and OPN's offsets from such views moved the peg 10-100 mm away (development bodies); a view
+of the opening shows hundreds."""
 NEAR_VIEW = 0.15
 """`look_again`: an OAKN estimate made from further than FAR_VIEW is taken again from this
 far from it (m), the peg aimed at it: from there the opening is within 15 deg of the image's
@@ -210,6 +219,32 @@ class CFVSAgent(Agent):
         pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
         return L.fine_action(tcp, pose), where
 
+    def on_face(self, H: np.ndarray, world: np.ndarray) -> np.ndarray:
+        """OAKN's hole frame `H` upright about its origin in 3- and 4-DoF (not about the
+        pre-insertion pose, whose lever turns a tilt into a lateral error), then moved onto
+        the opening the cloud `world` shows round it (`opening_fit`,
+        perception/opening_search.py)."""
+        if self.task.dof != 6:
+            H = H.copy()
+            H[:3, :3] = G.frame_with_z(np.array([0.0, 0.0, 1.0]), H[:3, 0])
+        if not self.cfg.opening_fit:
+            return H
+        half = hole_half_extent(self.peg, self.task.clearance)
+        if self.task.dof == 6 and (n := self.rim_axis(world, H, half)) is not None:
+            H = align_axis(H, n)
+        found = search_opening(world, H, half, round_opening=self.peg == "round")
+        return H if found is None else found
+
+    def sees_opening(self, pts: np.ndarray, tcp: np.ndarray) -> bool:
+        """Whether the fine view's object points `pts` (tool frame) show the estimated
+        opening and its rim (MIN_AT_OPENING); always, with no estimate."""
+        if self.estimate is None:
+            return True
+        world = tool_to_world(pts, tcp)
+        half = hole_half_extent(self.peg, self.task.clearance)
+        seen = points_at_opening(world, self.estimate, half, round_opening=self.peg == "round")
+        return seen >= MIN_AT_OPENING
+
     def rim_axis(self, world: np.ndarray, H: np.ndarray, half: float) -> np.ndarray | None:
         """The hole's axis from the face round the opening of hole frame `H` (its normal,
         `rim_plane`), or None when the ring round the opening shows no face."""
@@ -296,6 +331,8 @@ class CFVSAgent(Agent):
         if self.stage == "coarse":
             pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
             found = self.coarse_look(pts, tcp)
+            if found is not None:
+                found = (self.on_face(found[0], tool_to_world(pts, tcp)), found[1])
             first = self.estimate is None  # the coarse stage looks twice at most
             if found is None and first:
                 return Action.give_up("OAKN: the camera sees no hole object")
@@ -315,10 +352,16 @@ class CFVSAgent(Agent):
             return Action.move(self.constrain(pose, tcp))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
             pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
-            a = self.predict_offset(fine_crop(pts))
+            a = self.predict_offset(fine_crop(pts)) if self.sees_opening(pts, tcp) else None
             if a is None:
                 again = self.look_again(tcp)
-                return again or Action.give_up("OPN: nothing seen around the peg")
+                if again is not None:
+                    return again
+                if self.estimate is None:
+                    return Action.give_up("OPN: nothing seen around the peg")
+                self.phase = "fine: no view shows the opening, inserting at the estimate"
+                self.stage = "insert"
+                return self.insert(tcp)
             source = "OPN offset"
             if self.cfg.rim_plane:
                 a, source = self.refine(a, pts, tcp)

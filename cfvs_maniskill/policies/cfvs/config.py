@@ -48,11 +48,13 @@ class CFVSConfig:
     4-DoF holes are upright); OPN still gives where the hole is. False: the paper's fine
     stage (the `cfvs_no_rim` ablation)."""
     opening_fit: bool = True
-    """With `rim_plane`: place the opening on the face the wrist cloud shows round it
-    (perception/opening.py; its shape and size are the task's nominal ones): at the level
-    of the face just outside it (walls and flanges beside the opening pull OPN's height
-    up), centred on its edge and walls (a square's sides, a round hole's circle), a square
-    turned onto its walls. False: OPN's position and yaw."""
+    """With `rim_plane`: place the opening on the face the wrist cloud shows round it (its
+    shape and size are the task's nominal ones). Coarse: OAKN's estimate moved onto the
+    opening searched for within 4 cm of it (perception/opening_search.py), when one place
+    stands out. Fine: at the level of the face just outside it (walls and flanges beside
+    the opening pull OPN's height up), centred on its edge and walls (a square's sides, a
+    round hole's circle), a square turned onto its walls (perception/opening.py). False:
+    OAKN's and OPN's positions and yaw."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the
@@ -61,12 +63,12 @@ class CFVSConfig:
     look_again: bool = True
     """Look again from a better view where one look cannot be trusted: OAKN's estimate made
     from further than 20 cm is taken again from 15 cm (agent.NEAR_VIEW), the look whose
-    candidates lie closer together kept (`keypoint_spread`); and when a fine
-    look sees nothing round the peg (the opening nearer than the camera's
-    minimum range, a wall between the camera and the opening), look again from another
-    view of the same estimate: 2 cm further back, then (a square in 4/6-DoF) turned
-    about the hole's axis, which puts the camera on another side of the opening, up to
-    three turns. False: give up there."""
+    candidates lie closer together kept (`keypoint_spread`); and when a fine look does not
+    show the estimated opening (the opening nearer than the camera's minimum range, a wall
+    between the camera and the opening: agent.MIN_AT_OPENING), look again from another
+    view of the same estimate: 2 cm further back, then (a square in 4/6-DoF) turned about
+    the hole's axis, which puts the camera on another side of the opening, up to three
+    turns. When no view shows it, insert at the estimate. False: insert there at once."""
     calibration: bool = True
     """Correct the camera from what the robot knows is in view, measured on the coarse view
     and applied to every view of the episode: the table plane, at a known height, gives the
@@ -112,7 +114,7 @@ ABLATIONS: dict[str, tuple[str, str]] = {
     "no_rim": ("rim_plane", "the paper's fine stage: OPN's estimate, no face geometry"),
     "no_opening": ("opening_fit", "the opening's height, centre (a square's yaw) from OPN"),
     "fixed_yaw": ("clear_view", "the approach yaw nearest the tool's, whatever blocks the view"),
-    "no_look_again": ("look_again", "one coarse look; give up when a fine look sees nothing"),
+    "no_look_again": ("look_again", "one coarse look; insert when a fine look sees nothing"),
     "no_final_correction": ("final_correction", "insert from the last check (Algorithm 2)"),
     "no_calibration": ("calibration", "the cloud as reported, not set by the table and peg"),
 }

@@ -286,9 +286,9 @@ def test_of_two_coarse_looks_the_one_oakn_is_surer_of_is_kept(make_env, surer):
     obs, _ = env.reset(seed=3)
     agent = CFVSAgent(TaskSpec.of(env.unwrapped.task))
     agent.reset(0)
-    agent.on_face = lambda H, world: H  # each look's estimate as OAKN gives it
+    agent.on_face = lambda H, world: (H, False)  # each look's estimate as OAKN gives it
     agent.act(observe(env, obs))  # from 30 cm: it looks again from nearer
-    first, spread = agent.estimate.copy(), agent.spread
+    first, spread = agent.estimate.copy(), agent.doubt[1]
     assert 0.0 < spread < 0.05
     elsewhere = first.copy()
     elsewhere[:3, 3] += [0.05, 0.0, 0.0]
@@ -498,7 +498,8 @@ def test_a_coarse_estimate_centimetres_off_is_moved_onto_the_opening_in_view(mak
     off = H.copy()
     off[:3, :3] = Rotation.from_rotvec([np.radians(10), 0.0, 0.0]).as_matrix() @ H[:3, :3]
     off[:3, 3] += H[:3, :3] @ [0.015, -0.01, 0.02]
-    F = agent.on_face(off, world)
+    F, on_opening = agent.on_face(off, world)
+    assert on_opening
     d = H[:3, :3].T @ (F[:3, 3] - H[:3, 3])
     # From 18 mm off to within the search's cells (on the test objects p90 3.6 mm).
     assert np.hypot(d[0], d[1]) < 0.005 and abs(d[2]) < 0.002, d
@@ -506,5 +507,5 @@ def test_a_coarse_estimate_centimetres_off_is_moved_onto_the_opening_in_view(mak
         assert np.allclose(F[:3, 2], [0.0, 0.0, 1.0])
     else:
         assert np.degrees(np.arccos(F[:3, 2] @ H[:3, 2])) < 1.0  # the face's normal
-    plain = CFVSAgent(spec, ablation_config("no_opening")).on_face(off, world)
-    assert np.allclose(plain[:3, 3], off[:3, 3])
+    plain, on_opening = CFVSAgent(spec, ablation_config("no_opening")).on_face(off, world)
+    assert np.allclose(plain[:3, 3], off[:3, 3]) and not on_opening

@@ -137,7 +137,9 @@ class CFVSAgent(Agent):
         self.blind_x: list[np.ndarray] = []  # tool x axes whose fine look saw nothing
         self.rise = 0.0  # how much further back than the pre-insertion pose it servoes
         self.phase, self.estimate = "", None
-        self.spread = np.inf  # of OAKN's candidates for the estimate (`coarse_look`)
+        # How unsure the estimate is: not searched onto an opening (`on_face`), then the
+        # spread of OAKN's candidates for it (`coarse_look`).
+        self.doubt = (True, np.inf)
         # Point subsets are random; seeded per episode, so the same episode repeats exactly.
         self.rng = np.random.default_rng(seed)
 
@@ -219,21 +221,21 @@ class CFVSAgent(Agent):
         pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
         return L.fine_action(tcp, pose), where
 
-    def on_face(self, H: np.ndarray, world: np.ndarray) -> np.ndarray:
+    def on_face(self, H: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, bool]:
         """OAKN's hole frame `H` upright about its origin in 3- and 4-DoF (not about the
         pre-insertion pose, whose lever turns a tilt into a lateral error), then moved onto
         the opening the cloud `world` shows round it (`opening_fit`,
-        perception/opening_search.py)."""
+        perception/opening_search.py); and whether it was."""
         if self.task.dof != 6:
             H = H.copy()
             H[:3, :3] = G.frame_with_z(np.array([0.0, 0.0, 1.0]), H[:3, 0])
         if not self.cfg.opening_fit:
-            return H
+            return H, False
         half = hole_half_extent(self.peg, self.task.clearance)
         if self.task.dof == 6 and (n := self.rim_axis(world, H, half)) is not None:
             H = align_axis(H, n)
         found = search_opening(world, H, half, round_opening=self.peg == "round")
-        return H if found is None else found
+        return (H, False) if found is None else (found, True)
 
     def sees_opening(self, pts: np.ndarray, tcp: np.ndarray) -> bool:
         """Whether the fine view's object points `pts` (tool frame) show the estimated
@@ -331,16 +333,19 @@ class CFVSAgent(Agent):
         if self.stage == "coarse":
             pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
             found = self.coarse_look(pts, tcp)
-            if found is not None:
-                found = (self.on_face(found[0], tool_to_world(pts, tcp)), found[1])
             first = self.estimate is None  # the coarse stage looks twice at most
             if found is None and first:
                 return Action.give_up("OAKN: the camera sees no hole object")
-            # Of two looks, the one OAKN is surer of: from nearer, walls beside the opening
-            # can fill the view and pull its candidates apart.
-            took = found is not None and (first or found[1] < self.spread)
+            doubt = None
+            if found is not None:
+                H, on_opening = self.on_face(found[0], tool_to_world(pts, tcp))
+                doubt = (not on_opening, found[1])
+            # Of two looks, the one put on an opening it shows, then the one OAKN is surer
+            # of: from nearer, walls beside the opening can fill the view and pull its
+            # candidates apart.
+            took = doubt is not None and (first or doubt < self.doubt)
             if took:
-                self.estimate, self.spread = found
+                self.estimate, self.doubt = H, doubt
             H = self.estimate
             if first and (view := self.nearer_view(H, tcp)) is not None:
                 return view

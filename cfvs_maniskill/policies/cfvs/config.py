@@ -62,8 +62,9 @@ class CFVSConfig:
     face). False: always the nearest."""
     look_again: bool = True
     """Look again from a better view where one look cannot be trusted: OAKN's estimate made
-    from further than 20 cm is taken again from 15 cm (agent.NEAR_VIEW), the look whose
-    candidates lie closer together kept (`keypoint_spread`); and when a fine look does not
+    from further than 20 cm is taken again from 15 cm (agent.NEAR_VIEW), the look put on
+    an opening (`opening_fit`), then the one whose candidates lie closer together
+    (`keypoint_spread`), kept; and when a fine look does not
     show the estimated opening (the opening nearer than the camera's minimum range, a wall
     between the camera and the opening: agent.MIN_AT_OPENING), look again from another
     view of the same estimate: 2 cm further back, then (a square in 4/6-DoF) turned about

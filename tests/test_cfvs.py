@@ -509,3 +509,34 @@ def test_a_coarse_estimate_centimetres_off_is_moved_onto_the_opening_in_view(mak
         assert np.degrees(np.arccos(F[:3, 2] @ H[:3, 2])) < 1.0  # the face's normal
     plain, on_opening = CFVSAgent(spec, ablation_config("no_opening")).on_face(off, world)
     assert np.allclose(plain[:3, 3], off[:3, 3]) and not on_opening
+
+
+def test_a_fine_look_at_a_walls_back_is_not_used(make_env):
+    """Behind a wall the wrist camera sees the wall's back and nothing over the estimated
+    opening: OPN's offset from that view is not taken, the agent looks again instead; a
+    view of the face round the opening goes to OPN."""
+    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+    from cfvs_maniskill.policies.base import Observation
+    from cfvs_maniskill.policies.interface import insertion_pose
+
+    env = make_env("PegInsert3DoF-v1", obs_mode="pointcloud")
+    env.reset(seed=3)
+    H = env.unwrapped.hole_pose
+    spec = TaskSpec.of(env.unwrapped.task)
+    tcp = insertion_pose(spec.peg, H, -PRE_INSERT_HEIGHT, env.unwrapped.tcp_matrix())
+    u, v = np.random.default_rng(0).uniform([-0.05, 0.005], [0.05, 0.08], size=(3000, 2)).T
+
+    def first_fine_step(points: np.ndarray) -> str:
+        agent = CFVSAgent(spec)
+        agent.reset(0)
+        agent.stage, agent.estimate = "fine", H
+        xyzw = np.column_stack([points, np.ones(len(points))])[None]
+        a = agent.act(Observation({"pointcloud": {"xyzw": torch.from_numpy(xyzw).float()}}, tcp))
+        assert a.kind == "move"
+        return agent.phase
+
+    x, y, z = H[:3, 0], H[:3, 1], H[:3, 2]
+    wall = H[:3, 3] + np.outer(np.full(len(u), 0.06), x) + np.outer(u, y) + np.outer(v, z)
+    assert "looking again" in first_fine_step(wall)
+    face = H[:3, 3] + np.outer(u, x) + np.outer(v - 0.04, y)
+    assert first_fine_step(face).startswith("fine iteration 1")

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from cfvs_maniskill.control.executor import Executor
+from cfvs_maniskill.control.robot import SimRobot
 from cfvs_maniskill.episode import run_episode
 from cfvs_maniskill.policies.base import Action, Agent
 from cfvs_maniskill.policies.oracle.agent import OracleAgent
@@ -105,6 +106,27 @@ def test_a_faulty_episode_fails_with_a_reason_and_the_next_one_runs(make_env, fa
     # A whole record, as the run and eval commands write it.
     rec = json.loads(json.dumps(r.to_json()))
     assert rec["object"] == env.unwrapped.episode_info["object"] and rec["seed"] == 10
+    _then_oracle_succeeds(env)
+
+
+def test_a_step_that_makes_the_state_non_finite_is_named_by_that_step(make_env, monkeypatch):
+    """A blow-up is caught after the step that makes it, not only before the next one: on
+    an episode's last step there is no next one."""
+    env = make_env(ENV, obs_mode="state")
+    env.reset(seed=10)
+    robot = SimRobot(env)
+    step = env.step
+
+    def exploding_step(action):
+        out = step(action)
+        r = env.unwrapped.agent.robot
+        r.set_qvel(r.get_qvel() * np.nan)
+        return out
+
+    monkeypatch.setattr(env, "step", exploding_step)
+    with pytest.raises(FloatingPointError, match="NaN"):
+        robot.command(robot.joints())
+    monkeypatch.undo()
     _then_oracle_succeeds(env)
 
 

@@ -86,9 +86,10 @@ class SimRobot:
             _, _, _, _, self.last_info = self.gym_env.step(action)
         finally:
             self.env.defer_obs = False
+        self._check_finite()  # where a blow-up is made: named even on the last step
 
     def _check_finite(self) -> None:
-        """Before each step (a step that makes NaN is caught before the next one)."""
+        """Before each step too: a state set from outside the step can be non-finite."""
         qvel = self.env.agent.robot.get_qvel()[0].cpu().numpy()
         if not (np.all(np.isfinite(self.joints())) and np.all(np.isfinite(qvel))):
             raise FloatingPointError("simulation state became NaN")

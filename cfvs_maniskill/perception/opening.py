@@ -115,6 +115,14 @@ WIDTH_TOLERANCE = (-0.001, 0.004)
 nominal width apart (a chamfered or worn edge is wider; nearer is something else)."""
 
 
+def nominal_distance(q: np.ndarray, round_opening: bool) -> np.ndarray:
+    """How far each point `q` (..., 2 or 3: x, y in the face) lies from the opening's centre
+    in the opening's own shape: Euclidean for a round one, Chebyshev for a square one with
+    its sides along x and y, so `< half` is inside."""
+    xy = np.abs(q[..., :2])
+    return np.hypot(xy[..., 0], xy[..., 1]) if round_opening else xy.max(axis=-1)
+
+
 def fit_opening(
     points: np.ndarray,
     frame: np.ndarray,
@@ -130,7 +138,7 @@ def fit_opening(
     width, or its radius with `round_opening`."""
     # Only what the fit can reach (the rest of the cloud is most of it).
     q = (points - frame[:3, 3]) @ frame[:3, :2]
-    r = np.linalg.norm(q, axis=1) if round_opening else np.abs(q).max(axis=1)
+    r = nominal_distance(q, round_opening)
     points = points[r < half + SEARCH + MAX_SHIFT]
     H = frame.copy()
     for _ in range(iterations):
@@ -148,7 +156,7 @@ def _fit_once(
     points: np.ndarray, H: np.ndarray, half: float, round_opening: bool
 ) -> np.ndarray | None:
     q = (points - H[:3, 3]) @ H[:3, :3]  # the estimate's frame: x, y in the face, z out
-    r = np.linalg.norm(q[:, :2], axis=1) if round_opening else np.abs(q[:, :2]).max(axis=1)
+    r = nominal_distance(q, round_opening)
     level, spread, _ = _ring_level(q[:, 2], r, half)
     if level is None or spread > MAX_NOISE:
         return None
@@ -175,7 +183,7 @@ def face_height(
     width, or radius with `round_opening`); level None when fewer than MIN_LEVEL_POINTS
     are seen or they are too noisy to tell the face (FACE_HEIGHT_MAX_NOISE)."""
     q = (points - frame[:3, 3]) @ frame[:3, :3]
-    r = np.linalg.norm(q[:, :2], axis=1) if round_opening else np.abs(q[:, :2]).max(axis=1)
+    r = nominal_distance(q, round_opening)
     level, spread, seen = _ring_level(q[:, 2], r, half)
     if level is None or spread > FACE_HEIGHT_MAX_NOISE:
         return None, seen

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from cfvs_maniskill.perception.opening import face_level
+from cfvs_maniskill.perception.opening import face_level, nominal_distance
 
 CELL = 0.002
 """The grid's cell (m), at least; coarser where the cloud is sparser (a passive stereo
@@ -117,7 +117,7 @@ def _template(half: float, round_opening: bool, cell: float) -> tuple[np.ndarray
     m = int(np.ceil((half + RING[1]) / cell))
     u = np.arange(-m, m + 1) * cell
     x, y = np.meshgrid(u, u, indexing="ij")
-    r = np.hypot(x, y) if round_opening else np.maximum(np.abs(x), np.abs(y))
+    r = nominal_distance(np.stack([x, y], axis=-1), round_opening)
     ring = ((r > half + RING[0]) & (r < half + RING[1])).astype(float)
     return ring, (r < half - INNER_MARGIN).astype(float)
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from cfvs_maniskill import geometry as G
+from cfvs_maniskill.perception.opening import nominal_distance
 
 SIGHT_RADIUS = 0.015
 """Points within this distance of the camera's line of sight to the opening, measured
@@ -88,5 +89,5 @@ def points_at_opening(
     `round_opening`) across the face and of the face along the axis. Behind a wall the
     wrist camera sees the wall's back and none of these."""
     q = (world - hole[:3, 3]) @ hole[:3, :3]
-    r = np.hypot(q[:, 0], q[:, 1]) if round_opening else np.abs(q[:, :2]).max(axis=1)
+    r = nominal_distance(q, round_opening)
     return int(np.count_nonzero((r < half + AT_OPENING) & (np.abs(q[:, 2]) < AT_OPENING_DEPTH)))

@@ -119,6 +119,8 @@ class CFVSAgent(Agent):
         self.task = task
         self.cfg = cfg or CFVSConfig()
         self.peg = task.peg
+        self.half = hole_half_extent(task.peg, task.clearance)  # the opening's nominal size
+        self.round_opening = task.peg == "round"
         files = weights_for(task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation)
         self.oakn, self.oakn_meta = load_weights(files["oakn"], "oakn", task.peg)
         self.opn, self.opn_meta = load_weights(files["opn"], ("opnv", "opn"), task.peg)
@@ -191,29 +193,26 @@ class CFVSAgent(Agent):
         k, _ = weighted_keypoints(x, offsets, torch.sigmoid(logits))
         return np.array([L.fine_action_from_keypoints(ki.numpy()) for ki in k], np.float64)
 
-    def refine(self, a: np.ndarray, pts: np.ndarray, tcp: np.ndarray) -> tuple[np.ndarray, str]:
+    def refine(self, a: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> tuple[np.ndarray, str]:
         """OPN's offset `a` refined by the geometry of the face round the opening it points
-        at: in 6-DoF the hole's axis from the face's normal (`rim_plane`; 3- and 4-DoF holes
-        are upright), then the centre (and a square's yaw) from the opening seen on that
+        at (`world`: the fine view's object points): in 6-DoF the hole's axis from the
+        face's normal (`rim_plane`; 3- and 4-DoF holes are upright), then the centre (and a square's yaw) from the opening seen on that
         face and its height from the face (`opening_fit`). Returns the offset and where it
         came from; (a, "OPN offset") when the 6-DoF ring gives no face."""
         T = L.apply_action(tcp, a)
         T = T if self.task.dof == 6 else self.constrain(T, tcp)
         H = L.hole_frame_from_pre_insertion(T)
-        world = tool_to_world(pts, tcp)
-        half = hole_half_extent(self.peg, self.task.clearance)
-        round_opening = self.peg == "round"
         where = "upright axis"
         if self.task.dof == 6:
-            n = self.rim_axis(world, H, half)
+            n = self.rim_axis(world, H)
             if n is None:
                 return a, "OPN offset"
             H, where = align_axis(H, n), "axis from the rim"
         if self.cfg.opening_fit:
-            seen = fit_opening(world, H, half, round_opening=round_opening)
+            seen = fit_opening(world, H, self.half, round_opening=self.round_opening)
             where += ", OPN position" if seen is None else ", centre from the opening"
             H = H if seen is None else seen
-            level, _ = face_height(world, H, half, round_opening=round_opening)
+            level, _ = face_height(world, H, self.half, round_opening=self.round_opening)
             if level is not None:
                 H = H.copy()
                 H[:3, 3] += level * H[:3, 2]
@@ -231,27 +230,24 @@ class CFVSAgent(Agent):
             H[:3, :3] = G.frame_with_z(np.array([0.0, 0.0, 1.0]), H[:3, 0])
         if not self.cfg.opening_fit:
             return H, False
-        half = hole_half_extent(self.peg, self.task.clearance)
-        if self.task.dof == 6 and (n := self.rim_axis(world, H, half)) is not None:
+        if self.task.dof == 6 and (n := self.rim_axis(world, H)) is not None:
             H = align_axis(H, n)
-        found = search_opening(world, H, half, round_opening=self.peg == "round")
+        found = search_opening(world, H, self.half, round_opening=self.round_opening)
         return (H, False) if found is None else (found, True)
 
-    def sees_opening(self, pts: np.ndarray, tcp: np.ndarray) -> bool:
-        """Whether the fine view's object points `pts` (tool frame) show the estimated
-        opening and its rim (MIN_AT_OPENING); always, with no estimate."""
+    def sees_opening(self, world: np.ndarray) -> bool:
+        """Whether the fine view's object points `world` show the estimated opening and its
+        rim (MIN_AT_OPENING); always, with no estimate."""
         if self.estimate is None:
             return True
-        world = tool_to_world(pts, tcp)
-        half = hole_half_extent(self.peg, self.task.clearance)
-        seen = points_at_opening(world, self.estimate, half, round_opening=self.peg == "round")
+        seen = points_at_opening(world, self.estimate, self.half, self.round_opening)
         return seen >= MIN_AT_OPENING
 
-    def rim_axis(self, world: np.ndarray, H: np.ndarray, half: float) -> np.ndarray | None:
+    def rim_axis(self, world: np.ndarray, H: np.ndarray) -> np.ndarray | None:
         """The hole's axis from the face round the opening of hole frame `H` (its normal,
         `rim_plane`), or None when the ring round the opening shows no face."""
         square_x = H[:3, 0] if self.peg == "square" else None  # the ring follows its sides
-        return rim_normal(world, H[:3, 3], H[:3, 2], half, self.rng, square_x)
+        return rim_normal(world, H[:3, 3], H[:3, 2], self.half, self.rng, square_x)
 
     def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
         """The pre-insertion pose over hole frame `H`: at the yaw nearest the tool's own or,
@@ -336,9 +332,10 @@ class CFVSAgent(Agent):
             first = self.estimate is None  # the coarse stage looks twice at most
             if found is None and first:
                 return Action.give_up("OAKN: the camera sees no hole object")
+            world = tool_to_world(pts, tcp)
             doubt = None
             if found is not None:
-                H, on_opening = self.on_face(found[0], tool_to_world(pts, tcp))
+                H, on_opening = self.on_face(found[0], world)
                 doubt = (not on_opening, found[1])
             # Of two looks, the one put on an opening it shows, then the one OAKN is surer
             # of: from nearer, walls beside the opening can fill the view and pull its
@@ -353,11 +350,12 @@ class CFVSAgent(Agent):
             if not took:  # the nearer look saw no object, or its candidates lay further apart
                 self.phase += ", the first look's"
             self.stage = "fine" if self.cfg.coarse_to_fine else "insert"
-            pose = self.approach(H, tool_to_world(pts, tcp), tcp)
+            pose = self.approach(H, world, tcp)
             return Action.move(self.constrain(pose, tcp))
         if self.stage == "fine" and self.fine_steps < self.cfg.max_fine_iterations:
             pts = world_object_points(self.calibrated_points(xyzw, tcp), tcp, self.peg)
-            a = self.predict_offset(fine_crop(pts)) if self.sees_opening(pts, tcp) else None
+            world = tool_to_world(pts, tcp)
+            a = self.predict_offset(fine_crop(pts)) if self.sees_opening(world) else None
             if a is None:
                 again = self.look_again(tcp)
                 if again is not None:
@@ -369,7 +367,7 @@ class CFVSAgent(Agent):
                 return self.insert(tcp)
             source = "OPN offset"
             if self.cfg.rim_plane:
-                a, source = self.refine(a, pts, tcp)
+                a, source = self.refine(a, world, tcp)
             # the remaining offset in the allowed DoF only
             pre = self.constrain(L.apply_action(tcp, a), tcp)  # the pre-insertion pose
             self.estimate = L.hole_frame_from_pre_insertion(pre)
@@ -395,6 +393,6 @@ class CFVSAgent(Agent):
         to it over the estimate (the insertion starts PRE_INSERT_HEIGHT from the opening)."""
         if self.rise and self.estimate is not None:
             self.rise, self.stage = 0.0, "insert"
-            self.phase = "down to the pre-insertion pose"
+            self.phase += ": first down to the pre-insertion pose"
             return Action.move(self.constrain(self.standoff(self.estimate, tcp), tcp))
         return Action.insert()

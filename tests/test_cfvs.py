@@ -164,6 +164,15 @@ def test_ablation_weights_are_chosen_by_how_they_were_trained():
         load_weights(round_noaug["oakn"], "oakn", "round")
 
 
+def test_a_mount_of_its_own_takes_the_weights_trained_on_its_views(tmp_path):
+    for name in ("oakn.pt", "opnv.pt", "opnv.bracket.pt"):
+        (tmp_path / "round").mkdir(exist_ok=True)
+        (tmp_path / "round" / name).write_bytes(b"")
+    files = weights_for("PegInsert3DoF", "round", tmp_path, mount="bracket")
+    assert (files["oakn"].name, files["opn"].name) == ("oakn.pt", "opnv.bracket.pt")
+    assert weights_for("PegInsert3DoF", "round", tmp_path, mount="other")["opn"].name == "opnv.pt"
+
+
 def test_missing_weights_name_the_file(make_env, tmp_path):
 
     env = make_env("PegInsert6DoF-v1", obs_mode="pointcloud")

@@ -707,12 +707,13 @@ def test_an_agent_on_another_mount_than_the_rest_is_named_with_it():
     from cfvs_maniskill.report.tables import table_headline
 
     recs = [
-        {"label": a, "task": "PegInsert3DoF", "sensor": "ideal", "init": i, "success": True,
-         "mount": m}
-        for a, m in (("cfvs", "tip_view"), ("icp", "tip_view"), ("kovis", "flange_side"))
+        {"label": a, "task": "PegInsert3DoF", "sensor": s, "init": i, "success": True,
+         "mount": m if a == "kovis" else own}
+        for a, m in (("cfvs", ""), ("icp", ""), ("kovis", "flange_side"))
+        for s, own in (("ideal", "tip_view"), ("d435", "tip_view_long"))
         for i in ("small", "large")
     ]  # fmt: skip
-    text = table_headline(recs)
+    text = table_headline(recs, ("ideal", "d435"))
     assert "| cfvs | 1.00 / 1.00 |" in text and "| icp | 1.00 / 1.00 |" in text
     assert "| kovis (flange_side mount) | 1.00 / 1.00 |" in text
 

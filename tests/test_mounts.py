@@ -10,13 +10,14 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from cfvs_maniskill import geometry as G
-from cfvs_maniskill.constants import peg_half_extent
+from cfvs_maniskill.constants import PEG_LENGTH, PRE_INSERT_HEIGHT, peg_half_extent
 from cfvs_maniskill.perception.clouds import valid_world_points, world_to_tool
 from cfvs_maniskill.perception.peg import MIN_PEG_POINTS, peg_correction
 from cfvs_maniskill.policies.interface import TaskSpec
 from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT, MOUNTS
+from cfvs_maniskill.robots.ur5 import CAMERA_FOV
 from cfvs_maniskill.sensing.model import SAPIEN_CAM_TO_GL
-from cfvs_maniskill.sensing.profile import SensorProfileError, load_profile
+from cfvs_maniskill.sensing.profile import SensorProfileError, available_profiles, load_profile
 
 
 def _profile(tmp_path, name: str, **sections) -> str:
@@ -48,6 +49,26 @@ def test_a_profile_names_a_mount_or_describes_its_own(tmp_path):
     }
     m = load_profile(_profile(tmp_path, "c", mount=own)).camera_mount
     assert (m.name, m.position, m.source) == ("bracket", (0.1, 0.0, 0.0), "drawing 7")
+
+
+@pytest.mark.parametrize("sensor", available_profiles())
+def test_each_profiles_mount_shows_the_peg_tip_and_the_opening_in_its_range(sensor):
+    """The fine stage measures the peg and the opening in one view: on every shipped profile
+    whose mount is to see the peg (all but `flange_side`), the peg's last 2 cm and the
+    opening at the pre-insertion pose lie within the camera's depth range and field of
+    view. (tip_view under the D435's 12.7 cm Min-Z put the whole peg out of range.)"""
+    profile = load_profile(sensor)
+    mount = profile.camera_mount
+    if mount.name == "flange_side":
+        return
+    d = profile.depth
+    fov = d.fov_deg or (np.degrees(CAMERA_FOV),) * 2
+    z = np.linspace(PEG_LENGTH - 0.02, PEG_LENGTH, 5)
+    # the peg's side towards the camera (+x), its tip's centre, the opening's centre
+    side = np.c_[np.full_like(z, peg_half_extent("round")), 0 * z, z]
+    points = np.r_[side, [[0.0, 0.0, PEG_LENGTH], [0.0, 0.0, PEG_LENGTH + PRE_INSERT_HEIGHT]]]
+    seen = mount.in_view(points, (d.min_range, d.max_range), fov)
+    assert seen.all(), f"{sensor}: mount {mount.name} does not show {points[~seen]}"
 
 
 @pytest.mark.parametrize(

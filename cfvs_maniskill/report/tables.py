@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from collections import defaultdict
+from collections import Counter, defaultdict
 
 from cfvs_maniskill.report import paper
-from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT
 from cfvs_maniskill.stats import wilson_interval
 
 INITS = ("small", "large")
@@ -234,19 +233,29 @@ def table_agent_errors(records: list[dict], limit: int = 50) -> str:
     return "\n".join(out)
 
 
+def _usual_mounts(records: list[dict]) -> dict[str, str]:
+    """Per sensor profile, the mount most of its records were made on (the profile's own;
+    load.py names the mount of older records)."""
+    counts: dict[str, Counter] = defaultdict(Counter)
+    for r in records:
+        counts[r["sensor"]][r["mount"]] += 1
+    return {s: c.most_common(1)[0][0] for s, c in counts.items()}
+
+
 def table_headline(records: list[dict], sensors: tuple[str, ...] = HEADLINES["headline"]) -> str:
     """Success at 15 / 30 cm per agent, task and sensor profile, the main agents only (the
     README's tables; everything else is in the report)."""
     head = " | ".join(f"{t[len('PegInsert') :]} {s}" for t in HEADLINE_TASKS for s in sensors)
     out = [f"| agent | {head} |", "|---|" + "---|" * len(HEADLINE_TASKS) * len(sensors)]
     shown = [r for r in records if r["sensor"] in sensors and r["task"] in HEADLINE_TASKS]
+    usual = _usual_mounts(shown)
     for label in HEADLINE_AGENTS:
         recs = [r for r in shown if r["label"] == label]
         if not recs:
             continue
-        mounts = {r["mount"] for r in recs}  # load.py names the mount of older records
-        if mounts != {DEFAULT_MOUNT}:  # an agent trained for another mount runs on it: say so
-            label = f"{label} ({', '.join(sorted(mounts))} mount)"
+        # an agent trained for another mount than its profile's runs on it: say so
+        if any(r["mount"] != usual[r["sensor"]] for r in recs):
+            label = f"{label} ({', '.join(sorted({r['mount'] for r in recs}))} mount)"
         cells = []
         for t in HEADLINE_TASKS:
             for s in sensors:

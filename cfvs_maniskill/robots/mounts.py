@@ -42,6 +42,23 @@ class Mount:
         T[2, 3] -= PEG_LENGTH
         return T
 
+    def in_view(
+        self, points: np.ndarray, depth_range: tuple[float, float], fov_deg: tuple[float, float]
+    ) -> np.ndarray:
+        """Whether each tool0-frame point of `points` (K, 3) is where this camera returns
+        depth: its depth along the optical axis within `depth_range` (m) and its direction
+        within the field of view `fov_deg` (horizontal x vertical, degrees)."""
+        T = self.in_tool()
+        p = (np.asarray(points, float) - T[:3, 3]) @ T[:3, :3]  # x forward, y left, z up
+        depth = p[:, 0]
+        across = np.degrees(np.abs(np.arctan2(p[:, 1:], depth[:, None])))
+        return (
+            (depth >= depth_range[0])
+            & (depth <= depth_range[1])
+            & (across[:, 0] <= fov_deg[0] / 2)
+            & (across[:, 1] <= fov_deg[1] / 2)
+        )
+
     def check(self) -> tuple[str, str] | None:
         """(field, what is wrong) with the geometry, or None."""
         for field in ("position", "aim"):
@@ -79,6 +96,17 @@ MOUNTS = {
             "12 deg below the image's centre (the D405's vertical half field is 29 deg), "
             "0.11 m and 0.13 m away; the peg's face towards the camera is in view from the "
             "coarse view on, and the opening is seen beside the peg, not behind it",
+        ),
+        Mount(
+            "tip_view_long",
+            (0.17, 0.0, 0.05),
+            (0.0, 0.0, 0.17),
+            "tip_view's bracket lengthened to 17 cm off the tool axis, for a camera whose "
+            "minimum range hides tip_view's peg (a D435's Min-Z is 12.7 cm even with its "
+            "disparity shift; on tip_view the tip is at 11 cm depth): the peg's last 2 cm "
+            "at 13.7-14.9 cm depth, 16-24 deg below the image's centre, the opening at the "
+            "pre-insertion pose at 18.5 cm and, seen past the peg's tip, whole (moving the "
+            "camera back instead hides half the opening behind the peg)",
         ),
         Mount(
             "peg_view",

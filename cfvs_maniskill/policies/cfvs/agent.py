@@ -77,12 +77,17 @@ opening then 15 cm from the camera, beyond a D435's 12.7 cm minimum range."""
 
 
 def weights_for(
-    task: str, peg: str, weights_dir: Path, augmentation: bool | None = None
+    task: str,
+    peg: str,
+    weights_dir: Path,
+    augmentation: bool | None = None,
+    mount: str | None = None,
 ) -> dict[str, Path]:
     """The OAKN / OPN files for a task: `tasks.yaml` in the weights folder maps task names;
     tasks it does not list (e.g. new task files) use `<peg>/oakn.pt`, `<peg>/opnv.pt`.
     With `augmentation` set, the file trained that way: the shipped one if its .json says
-    so, else its `_aug` / `_noaug` sibling."""
+    so, else its `_aug` / `_noaug` sibling. A file trained on the views of camera mount
+    `mount`, `<name>.<mount>.pt` beside it, is taken in its place where there is one."""
     table_file = weights_dir / "tasks.yaml"
     table = read_yaml(table_file, WeightsTableError) if table_file.is_file() else {}
     if not isinstance(table, dict | None):
@@ -98,7 +103,8 @@ def weights_for(
         p = weights_dir / entry[net]
         if augmentation is not None and trained_with_augmentation(p) is not augmentation:
             p = p.with_name(p.stem + ("_aug.pt" if augmentation else "_noaug.pt"))
-        out[net] = p
+        own = p.with_name(f"{p.stem}.{mount}.pt")
+        out[net] = own if mount and own.is_file() else p
     return out
 
 
@@ -121,7 +127,9 @@ class CFVSAgent(Agent):
         self.peg = task.peg
         self.half = hole_half_extent(task.peg, task.clearance)  # the opening's nominal size
         self.round_opening = task.peg == "round"
-        files = weights_for(task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation)
+        files = weights_for(
+            task.name, task.peg, self.cfg.weights_dir, self.cfg.augmentation, task.mount.name
+        )
         self.oakn, self.oakn_meta = load_weights(files["oakn"], "oakn", task.peg)
         self.opn, self.opn_meta = load_weights(files["opn"], ("opnv", "opn"), task.peg)
         # the coarse moves and the insertion, the fine loop, a step back and down, the turns

@@ -731,3 +731,15 @@ def test_table_iv_compares_the_ablations_under_the_papers_protocol():
     rows = {line.split(" | ")[0].strip("| "): line for line in table_iv(records).splitlines()}
     assert "0.25" in rows["cfvs_no_c2f"] and "(n=4)" in rows["cfvs_no_c2f"]
     assert "1.00" in rows["cfvs"] and "(n=2)" in rows["cfvs"]
+
+
+def test_a_record_on_a_mount_with_its_own_weights_is_checked_against_them():
+    """`report --check` rebuilds the agent on the record's mount: a d435 record, made
+    with the nets trained for `tip_view_long`, is current; one on `tip_view` is not."""
+    from cfvs_maniskill.report.trace import agent_weights_today
+
+    long = agent_weights_today("cfvs", "PegInsert3DoF", "tip_view_long")
+    usual = agent_weights_today("cfvs", "PegInsert3DoF", "tip_view")
+    assert "agents/cfvs/round/opnv.tip_view_long.pt" in long
+    assert "agents/cfvs/round/opnv.pt" in usual and long != usual
+    assert agent_weights_today("cfvs", "PegInsert3DoF", "my_bracket") == usual

@@ -132,19 +132,22 @@ def _today(file: str) -> str | None:
 
 
 @functools.cache
-def agent_weights_today(agent: str, task: str) -> dict[str, str] | None:
-    """{file: sha256} the agent loads today for the task, None: it cannot be built."""
+def agent_weights_today(agent: str, task: str, mount: str | None = None) -> dict[str, str] | None:
+    """{file: sha256} the agent loads today for the task with its camera on the named
+    `mount` (None or a mount of one's own: the default; an agent may load weights trained
+    for a mount), None: it cannot be built."""
     from cfvs_maniskill import TASKS
     from cfvs_maniskill.policies.interface import TaskSpec
     from cfvs_maniskill.policies.registry import PRIVILEGED, resolve_agent
     from cfvs_maniskill.provenance import track_weights
+    from cfvs_maniskill.robots.mounts import MOUNTS
 
     if agent in PRIVILEGED:
         return {}  # the oracle loads nothing
     try:
         factory = resolve_agent(agent)
         with track_weights() as loaded:
-            factory(TaskSpec.of(TASKS[task]))
+            factory(TaskSpec.of(TASKS[task], MOUNTS.get(mount or "")))
     except Exception:  # removed from the registry, no weights for the task, ...
         return None
     return loaded
@@ -173,7 +176,7 @@ def stale_reasons(rec: dict, p: dict) -> list[str]:
     if p.get("weights") is None:
         out.append("weights unknown")
     else:
-        today = agent_weights_today(rec["agent"], rec["task"])
+        today = agent_weights_today(rec["agent"], rec["task"], rec.get("mount"))
         if today is None:
             out.append(f"agent {rec['agent']} cannot be built today")
         elif today != p["weights"]:

@@ -204,9 +204,10 @@ class CFVSAgent(Agent):
     def refine(self, a: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> tuple[np.ndarray, str]:
         """OPN's offset `a` refined by the geometry of the face round the opening it points
         at (`world`: the fine view's object points): in 6-DoF the hole's axis from the
-        face's normal (`rim_plane`; 3- and 4-DoF holes are upright), then the centre (and a square's yaw) from the opening seen on that
-        face and its height from the face (`opening_fit`). Returns the offset and where it
-        came from; (a, "OPN offset") when the 6-DoF ring gives no face."""
+        face's normal (`rim_plane`; 3- and 4-DoF holes are upright), then the centre (and a
+        square's yaw) from the opening seen on that face and its height from the face
+        (`opening_fit`). Returns the offset and where it came from; (a, "OPN offset") when
+        the 6-DoF ring gives no face."""
         T = L.apply_action(tcp, a)
         T = T if self.task.dof == 6 else self.constrain(T, tcp)
         H = L.hole_frame_from_pre_insertion(T)

@@ -12,6 +12,7 @@ they were in COMMIT, read from git when a report needs them (`resolve`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import json
@@ -133,21 +134,23 @@ def _today(file: str) -> str | None:
 
 @functools.cache
 def agent_weights_today(agent: str, task: str, mount: str | None = None) -> dict[str, str] | None:
-    """{file: sha256} the agent loads today for the task with its camera on the named
-    `mount` (None or a mount of one's own: the default; an agent may load weights trained
-    for a mount), None: it cannot be built."""
+    """{file: sha256} the agent loads today for the task with its camera on the mount named
+    `mount` (an agent may load weights trained for a mount; None: the default), None: it
+    cannot be built."""
     from cfvs_maniskill import TASKS
     from cfvs_maniskill.policies.interface import TaskSpec
     from cfvs_maniskill.policies.registry import PRIVILEGED, resolve_agent
     from cfvs_maniskill.provenance import track_weights
-    from cfvs_maniskill.robots.mounts import MOUNTS
+    from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT, MOUNTS
 
     if agent in PRIVILEGED:
         return {}  # the oracle loads nothing
     try:
         factory = resolve_agent(agent)
         with track_weights() as loaded:
-            factory(TaskSpec.of(TASKS[task], MOUNTS.get(mount or "")))
+            # a bracket of one's own is known here by its name, all weights_for reads
+            own = dataclasses.replace(MOUNTS[DEFAULT_MOUNT], name=mount) if mount else None
+            factory(TaskSpec.of(TASKS[task], MOUNTS.get(mount or "", own)))
     except Exception:  # removed from the registry, no weights for the task, ...
         return None
     return loaded

@@ -12,12 +12,12 @@ they were in COMMIT, read from git when a report needs them (`resolve`)."""
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import hashlib
 import json
 import subprocess
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 from cfvs_maniskill import resources
@@ -149,8 +149,8 @@ def agent_weights_today(agent: str, task: str, mount: str | None = None) -> dict
         factory = resolve_agent(agent)
         with track_weights() as loaded:
             # a bracket of one's own is known here by its name, all weights_for reads
-            own = dataclasses.replace(MOUNTS[DEFAULT_MOUNT], name=mount) if mount else None
-            factory(TaskSpec.of(TASKS[task], MOUNTS.get(mount or "", own)))
+            on = MOUNTS.get(mount or DEFAULT_MOUNT) or replace(MOUNTS[DEFAULT_MOUNT], name=mount)
+            factory(TaskSpec.of(TASKS[task], on))
     except Exception:  # removed from the registry, no weights for the task, ...
         return None
     return loaded

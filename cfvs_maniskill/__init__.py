@@ -12,7 +12,7 @@ import warnings
 
 from cfvs_maniskill.envs.registration import register_tasks as _register_tasks
 
-__version__ = "1.0.0"
+__version__ = "1.1.0"
 
 # SAPIEN falls back to its bundled Vulkan loader, which works; its warning only confuses.
 warnings.filterwarnings("ignore", message="Failed to find system libvulkan")

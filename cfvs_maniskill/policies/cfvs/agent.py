@@ -103,8 +103,9 @@ def weights_for(
         p = weights_dir / entry[net]
         if augmentation is not None and trained_with_augmentation(p) is not augmentation:
             p = p.with_name(p.stem + ("_aug.pt" if augmentation else "_noaug.pt"))
-        own = p.with_name(f"{p.stem}.{mount}.pt")
-        out[net] = own if mount and own.is_file() else p
+        if mount and (own := p.with_name(f"{p.stem}.{mount}.pt")).is_file():
+            p = own
+        out[net] = p
     return out
 
 
@@ -255,7 +256,7 @@ class CFVSAgent(Agent):
     def rim_axis(self, world: np.ndarray, H: np.ndarray) -> np.ndarray | None:
         """The hole's axis from the face round the opening of hole frame `H` (its normal,
         `rim_plane`), or None when the ring round the opening shows no face."""
-        square_x = H[:3, 0] if self.peg == "square" else None  # the ring follows its sides
+        square_x = None if self.round_opening else H[:3, 0]  # the ring follows its sides
         return rim_normal(world, H[:3, 3], H[:3, 2], self.half, self.rng, square_x)
 
     def approach(self, H: np.ndarray, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
@@ -263,7 +264,7 @@ class CFVSAgent(Agent):
         with `clear_view`, the nearest whose camera sees the opening past what stands on
         the face (`world`: the coarse view's object points)."""
         nearest = self.standoff(H, tcp)
-        if not (self.cfg.clear_view and self.peg == "square" and self.task.dof != 3):
+        if not (self.cfg.clear_view and not self.round_opening and self.task.dof != 3):
             return nearest  # a 3-DoF peg keeps its yaw (task_dof.constrain)
         poses = approach_yaws(nearest, tcp[:3, 0])
         i, _ = clear_view_yaw(world, poses, self.task.camera_in_tcp(), H)

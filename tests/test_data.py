@@ -528,6 +528,50 @@ def test_fixture_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
         procedural_specs(2, 1, "square", 0.004, 0.045, "fixtures")
 
 
+def test_housing_features_stand_where_they_say_and_the_family_is_held_out(tmp_path):
+    """`housings` (release 1.2.0's frozen set): a countersink slopes round the opening and
+    puts the frame where the cone meets it, a tower lifts the opening 4-12 cm, a slot and a
+    bracket keep off the opening's wall; training never draws the family."""
+    import trimesh
+
+    from cfvs_maniskill.data import shapes as S
+    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
+
+    keep, top = S.keep_clear("square", 0.004), 0.05
+    plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
+    hole = np.array([0.03, -0.02])
+    for seed in range(4):
+        sunk, level = S.add_countersink(np.random.default_rng(seed), plate, hole, top, keep)
+        assert top - 0.0075 < level < top - 0.0009, seed  # 1-4 mm flare at 30-45 deg
+        assert sunk.volume < plate.volume, seed
+        n, at = sunk.face_normals, sunk.triangles_center
+        near = np.linalg.norm(at[:, :2] - hole, axis=1) < keep
+        assert np.any(near & (np.abs(n[:, 2]) > 0.5) & (np.abs(n[:, 2]) < 0.9)), seed  # a cone
+        tower, raised = S.add_tower(np.random.default_rng(seed), plate, hole, top, keep)
+        assert 0.04 <= raised - top <= 0.12 and tower.bounds[1, 2] == pytest.approx(raised)
+        slot, _ = S.add_slot(np.random.default_rng(seed), plate, hole, top, keep)
+        bracket, _ = S.add_bracket(np.random.default_rng(seed), plate, hole, top, keep)
+        assert slot.volume < plate.volume < bracket.volume, seed
+        n = bracket.face_normals
+        assert np.any((np.abs(n[:, 2]) > 0.2) & (np.abs(n[:, 2]) < 0.995)), seed  # gussets
+        for body in (slot, bracket):  # nothing over or cut into the opening's wall
+            v, _ = trimesh.sample.sample_surface(body, 20000, seed=seed)
+            ring = (np.linalg.norm(v[:, :2] - hole, axis=1) < keep) & (v[:, 2] > 1e-4)
+            assert ring.sum() > 100 and np.all(np.abs(v[ring, 2] - top) < 1e-6), seed
+    drawn = [
+        S.housing_body(np.random.default_rng(s), "square", 0.004, tmp_path, f"h{s}")
+        for s in range(6)
+    ]
+    assert sum(d is not None for d in drawn) >= 4
+    for s, d in enumerate(drawn):
+        if d is not None:
+            body = trimesh.load(tmp_path / f"h{s}.stl")
+            assert body.is_watertight and len(body.split(only_watertight=False)) == 1, s
+    assert "housings" not in TRAINING_FAMILIES
+    with pytest.raises(ValueError, match="held out of training"):
+        procedural_specs(2, 1, "square", 0.004, 0.045, "housings")
+
+
 def test_a_dataset_can_be_collected_on_another_mount_than_the_profiles():
     """`--mount NAME` puts the camera on a named mount for every scene of the file (KOVIS's
     own mount given way to), and the file says so (a resume must match it)."""

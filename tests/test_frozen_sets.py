@@ -16,6 +16,7 @@ FROZEN_RESULTS = (
     "results/generalisation_grooved",
     "results/generalisation_plates",
     "results/generalisation_fixtures",
+    "results/generalisation_housings",
 )
 """The results folders of the frozen sets (assets/final, assets/generalisation*)."""
 

@@ -206,6 +206,7 @@ FAMILIES = {
     "grooved": "g",
     "plates": "l",
     "fixtures": "x",
+    "housings": "h",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

@@ -18,6 +18,11 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   with two or three of: a bolt circle of small drilled holes round the opening, dowel pins
   or posts standing beside it, a ramp rising beside it, a wall, a step down, an island.
   Held out: release 1.1.0's frozen set (`assets/generalisation_fixtures/`) is made of it.
+- `housings`: housing blocks and discs up to 30 cm, the opening anywhere on the face, with
+  two or three of: the opening countersunk (a cone round its edge), on a tower 4-12 cm
+  tall, an elongated slot beside it, a bracket (a wall braced by sloped gussets) facing
+  it, ribs, a wall. Held out: release 1.2.0's frozen set (`assets/generalisation_housings/`)
+  is made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -424,6 +429,110 @@ def fixture_body(rng, peg, clearance, folder: Path, name: str):
     return _write(mesh, hole, top, folder, name)
 
 
+def add_countersink(rng, mesh, hole, top, keep):
+    """The opening countersunk: a cone 60-90 deg across round its edge, 1-4 mm wider than
+    the widest opening at the face; the opening (the frame) where the cone meets it."""
+    bottom = keep - MIN_WALL  # the widest opening's circumscribed radius
+    flare = rng.uniform(0.001, 0.004)
+    depth = flare / np.tan(np.deg2rad(rng.uniform(30, 45)))  # half the cone's angle
+    a = np.linspace(0, 2 * np.pi, 96, endpoint=False)
+    rim = np.stack([np.cos(a), np.sin(a)], axis=1)
+    lip = 0.001  # above the face, so the cut opens through it
+    upper = np.c_[hole + rim * (bottom + flare * (1 + lip / depth)), np.full(96, top + lip)]
+    lower = np.c_[hole + rim * bottom, np.full(96, top - depth)]
+    cone = trimesh.convex.convex_hull(np.vstack([upper, lower]))
+    return _minus(mesh, [cone]), top - depth
+
+
+def add_tower(rng, mesh, hole, top, keep):
+    """The opening on a round or square tower 4-12 cm above the face, 3-15 mm wider than
+    the opening's wall: a small face far above the rest of the part."""
+    h, r = rng.uniform(0.04, 0.12), keep + rng.uniform(0.003, 0.015)
+    if rng.random() < 0.5:
+        tower = trimesh.creation.cylinder(r, h + 0.002, 64)
+        tower.apply_translation([*hole, top + h / 2 - 0.001])
+    else:
+        tower = box_at([2 * r, 2 * r, h + 0.002], [*hole, top + h / 2 - 0.001], rng.uniform(0, 1))
+    return _union([mesh, tower]), top + h
+
+
+def add_slot(rng, mesh, hole, top, keep):
+    """An elongated blind slot 1-6 cm from the opening's wall: 0.8-1.3 times the opening's
+    width across, 1.5-3 times as long as wide, 1-3 cm deep, rounded ends, its middle on
+    the face."""
+    w = (keep - MIN_WALL) / np.sqrt(2) * rng.uniform(0.8, 1.3)  # half the slot's width
+    d = rng.uniform(0.01, 0.03)
+    for _ in range(16):
+        straight = 2 * w * rng.uniform(0.5, 2)
+        side, turn = rng.uniform(0, 2 * np.pi), rng.uniform(0, np.pi)
+        c = hole + _unit(side) * (keep + straight / 2 + w + rng.uniform(0.01, 0.06))
+        if _solid_under(mesh, c, w, top):
+            break
+    else:
+        return mesh, top  # no room on this face: the part goes without
+    along = _unit(turn) * straight / 2
+    ends = []
+    for s in (-1, 1):
+        end = trimesh.creation.cylinder(w, 2 * d, 48)
+        end.apply_translation([*(c + s * along), top])
+        ends.append(end)
+    body = box_at([straight, 2 * w, 2 * d], [*c, top], turn)
+    return _minus(mesh, [_union([body, *ends])]), top
+
+
+def add_bracket(rng, mesh, hole, top, keep):
+    """A bracket 1-4 cm from the opening's wall: a wall 3-8 cm tall braced on the opening's
+    side by one to three gussets, sloped faces that rise from the face to the wall's top."""
+    side = rng.uniform(0, 2 * np.pi)
+    u, v = _unit(side), _unit(side + np.pi / 2)
+    thick, length, h = rng.uniform(0.004, 0.012), rng.uniform(0.05, 0.16), rng.uniform(0.03, 0.08)
+    gap = keep + rng.uniform(0.01, 0.04)
+    run = min(gap - keep - 0.003, rng.uniform(0.01, 0.04))  # the gussets' foot, off the wall
+    parts = [
+        box_at(
+            [thick, length, h + 0.002], [*(hole + u * (gap + thick / 2)), top + h / 2 - 0.001], side
+        )
+    ]
+    for k in range(int(rng.integers(1, 4))):
+        at = v * length * rng.uniform(-0.4, 0.4) if k else v * 0.0
+        web = rng.uniform(0.002, 0.005) / 2
+        section = [
+            (gap + 0.001, top - 0.001),
+            (gap - run, top - 0.001),
+            (gap + 0.001, top + h * 0.8),
+        ]
+        corners = [[*(hole + u * x + at + v * w), z] for x, z in section for w in (-web, web)]
+        parts.append(trimesh.convex.convex_hull(np.array(corners)))
+    return _union([mesh, *parts]), top
+
+
+HOUSING_FEATURES = (add_tower, add_slot, add_bracket, add_ribs, add_wall, add_countersink)
+
+
+def housing_body(rng, peg, clearance, folder: Path, name: str):
+    """A housing block (10-30 cm) or a disc 10-30 cm across, 3-8 cm thick, the opening
+    anywhere on the face, with two or three of `HOUSING_FEATURES` (a tower after what stands
+    on the face, a countersink last: it is cut where the opening ends up)."""
+    keep = keep_clear(peg, clearance)
+    top = rng.uniform(0.03, 0.08)
+    if rng.random() < 0.5:
+        sx, sy = rng.uniform(0.10, 0.30, size=2)
+        mesh = box_at([sx, sy, top], [0, 0, top / 2])
+        hole = (np.array([sx, sy]) / 2 - keep) * rng.uniform(-0.95, 0.95, size=2)
+    else:
+        r = rng.uniform(0.05, 0.15)
+        mesh = trimesh.creation.cylinder(r, top, 128)
+        mesh.apply_translation([0, 0, top / 2])
+        hole = _unit(rng.uniform(0, 2 * np.pi)) * (r - keep) * np.sqrt(rng.uniform(0, 0.9))
+    chosen = rng.choice(HOUSING_FEATURES, size=int(rng.integers(2, 4)), replace=False)
+    order = {add_tower: 1, add_countersink: 2}
+    for add in sorted(chosen, key=lambda f: order.get(f, 0)):
+        mesh, top = add(rng, mesh, hole, top, keep)
+    if len(mesh.split(only_watertight=False)) > 1:
+        return None  # a part not joined to the body (it would float): draw again
+    return _write(mesh, hole, top, folder, name)
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
@@ -432,6 +541,7 @@ FAMILIES: dict[str, Draw] = {
     "grooved": grooved_body,
     "plates": plate_body,
     "fixtures": fixture_body,
+    "housings": housing_body,
 }
-HELD_OUT_FAMILIES = ("composite", "grooved", "plates", "fixtures")
+HELD_OUT_FAMILIES = ("composite", "grooved", "plates", "fixtures", "housings")
 """Never drawn for training: the frozen generalisation sets' families."""

@@ -403,6 +403,19 @@ def add_ramp(rng, mesh, hole, top, keep):
     return _union([mesh, wedge]), top
 
 
+def _plate_or_disc(rng, keep: float, top: float, across: tuple[float, float]):
+    """A plate (each side within `across`, m) or a disc (its diameter within it), `top`
+    thick, and the opening's place anywhere on its face: (mesh, hole x y)."""
+    if rng.random() < 0.5:
+        sx, sy = rng.uniform(*across, size=2)
+        mesh = box_at([sx, sy, top], [0, 0, top / 2])
+        return mesh, (np.array([sx, sy]) / 2 - keep) * rng.uniform(-0.95, 0.95, size=2)
+    r = rng.uniform(across[0] / 2, across[1] / 2)
+    mesh = trimesh.creation.cylinder(r, top, 128)
+    mesh.apply_translation([0, 0, top / 2])
+    return mesh, _unit(rng.uniform(0, 2 * np.pi)) * (r - keep) * np.sqrt(rng.uniform(0, 0.9))
+
+
 FIXTURE_FEATURES = (add_bolt_circle, add_pins, add_ramp, add_wall, add_drop, add_island)
 
 
@@ -412,15 +425,7 @@ def fixture_body(rng, peg, clearance, folder: Path, name: str):
     what stands beside the opening stands on the face, not at the island's height)."""
     keep = keep_clear(peg, clearance)
     top = rng.uniform(0.03, 0.07)
-    if rng.random() < 0.5:
-        sx, sy = rng.uniform(0.12, 0.28, size=2)
-        mesh = box_at([sx, sy, top], [0, 0, top / 2])
-        hole = (np.array([sx, sy]) / 2 - keep) * rng.uniform(-0.95, 0.95, size=2)
-    else:
-        r = rng.uniform(0.06, 0.14)
-        mesh = trimesh.creation.cylinder(r, top, 128)
-        mesh.apply_translation([0, 0, top / 2])
-        hole = _unit(rng.uniform(0, 2 * np.pi)) * (r - keep) * np.sqrt(rng.uniform(0, 0.9))
+    mesh, hole = _plate_or_disc(rng, keep, top, (0.12, 0.28))
     chosen = rng.choice(FIXTURE_FEATURES, size=int(rng.integers(2, 4)), replace=False)
     for add in sorted(chosen, key=lambda f: f is add_island):  # the rest stand on the face
         mesh, top = add(rng, mesh, hole, top, keep)
@@ -515,15 +520,7 @@ def housing_body(rng, peg, clearance, folder: Path, name: str):
     on the face, a countersink last: it is cut where the opening ends up)."""
     keep = keep_clear(peg, clearance)
     top = rng.uniform(0.03, 0.08)
-    if rng.random() < 0.5:
-        sx, sy = rng.uniform(0.10, 0.30, size=2)
-        mesh = box_at([sx, sy, top], [0, 0, top / 2])
-        hole = (np.array([sx, sy]) / 2 - keep) * rng.uniform(-0.95, 0.95, size=2)
-    else:
-        r = rng.uniform(0.05, 0.15)
-        mesh = trimesh.creation.cylinder(r, top, 128)
-        mesh.apply_translation([0, 0, top / 2])
-        hole = _unit(rng.uniform(0, 2 * np.pi)) * (r - keep) * np.sqrt(rng.uniform(0, 0.9))
+    mesh, hole = _plate_or_disc(rng, keep, top, (0.10, 0.30))
     chosen = rng.choice(HOUSING_FEATURES, size=int(rng.integers(2, 4)), replace=False)
     order = {add_tower: 1, add_countersink: 2}
     for add in sorted(chosen, key=lambda f: order.get(f, 0)):

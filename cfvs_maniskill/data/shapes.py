@@ -297,13 +297,19 @@ def add_drop(rng, mesh, hole, top, keep):
 def add_island(rng, mesh, hole, top, keep):
     """The opening on a small island: a round or square boss 1-5 mm wider than the
     opening's wall, 5-25 mm above the face."""
-    h, r = rng.uniform(0.005, 0.025), keep + rng.uniform(0.001, 0.005)
+    return _raise_opening(rng, mesh, hole, top, keep, (0.005, 0.025), (0.001, 0.005))
+
+
+def _raise_opening(rng, mesh, hole, top, keep, height, wider):
+    """The opening on a round or square block `height` (m, range) above the face and
+    `wider` (m, range) beyond the opening's wall: (mesh, the new face's height)."""
+    h, r = rng.uniform(*height), keep + rng.uniform(*wider)
     if rng.random() < 0.5:
-        island = trimesh.creation.cylinder(r, h + 0.002, 64)
-        island.apply_translation([*hole, top + h / 2 - 0.001])
+        block = trimesh.creation.cylinder(r, h + 0.002, 64)
+        block.apply_translation([*hole, top + h / 2 - 0.001])
     else:
-        island = box_at([2 * r, 2 * r, h + 0.002], [*hole, top + h / 2 - 0.001], rng.uniform(0, 1))
-    return _union([mesh, island]), top + h
+        block = box_at([2 * r, 2 * r, h + 0.002], [*hole, top + h / 2 - 0.001], rng.uniform(0, 1))
+    return _union([mesh, block]), top + h
 
 
 def add_decoys(rng, mesh, hole, top, keep):
@@ -452,13 +458,7 @@ def add_countersink(rng, mesh, hole, top, keep):
 def add_tower(rng, mesh, hole, top, keep):
     """The opening on a round or square tower 4-12 cm above the face, 3-15 mm wider than
     the opening's wall: a small face far above the rest of the part."""
-    h, r = rng.uniform(0.04, 0.12), keep + rng.uniform(0.003, 0.015)
-    if rng.random() < 0.5:
-        tower = trimesh.creation.cylinder(r, h + 0.002, 64)
-        tower.apply_translation([*hole, top + h / 2 - 0.001])
-    else:
-        tower = box_at([2 * r, 2 * r, h + 0.002], [*hole, top + h / 2 - 0.001], rng.uniform(0, 1))
-    return _union([mesh, tower]), top + h
+    return _raise_opening(rng, mesh, hole, top, keep, (0.04, 0.12), (0.003, 0.015))
 
 
 def add_slot(rng, mesh, hole, top, keep):

@@ -5,9 +5,10 @@ The asset contract puts every hole's axis along the normal of the planar face it
 opening closely, so its normal is a direct measurement of the hole's axis, which CFVS's
 fine network only infers (and misreads beside a raised block: on a stepped block it turned
 the peg 7-10 deg off the axis). Other surfaces can reach into the ring (a step's wall, a
-rib, an edge's side face), so the plane is fitted by least median of squares: no distance
-threshold to tune per sensor, right while the face holds more than half the ring's points.
-The ring follows the opening's nominal shape: for a square opening its sides (nearest the
+rib, an edge's side face, a lower level), so the face is the surface next to the opening:
+the least-median-of-squares plane (no distance threshold to tune per sensor) of the ring
+5, 10 or 20 mm wide that fits one closest, grown over the 20 mm ring for precision. The
+ring follows the opening's nominal shape: for a square opening its sides (nearest the
 opening, where a small face such as a boss's top or a counterbore's floor still is),
 falling back to a round ring beyond its corners.
 """
@@ -16,34 +17,36 @@ from __future__ import annotations
 
 import numpy as np
 
-from cfvs_maniskill.geometry import angle_deg
+from cfvs_maniskill.geometry import angle_deg, robust_sigma
 
 RING_MARGIN = 0.004
 """The ring starts this far outside the opening (its sides, or for the round ring its
 farthest point): beyond the chamfer and a few millimetres of error in the estimated
 centre."""
+SEED_WIDTHS = (0.005, 0.010, 0.020)
+"""The face is the surface next to the opening: of the rings this wide, the one whose
+least-median plane fits it closest (the smallest robust sigma) says which surface it is.
+A ring that holds another surface too fits its best plane with a spread of millimetres
+(beside a counterbore's step, a lower level round a small island); one on the face alone
+fits it within the sensor's noise. ..."""
 RING_WIDTH = 0.020
-"""... and is this wide, unless the narrow ring below is precise enough."""
-NARROW_RING_WIDTH = 0.010
-"""The ring tried first: beside a step round the opening (a counterbore's floor 6 mm
-below the top face, 2 cm out) a 20 mm ring reaches the step's wall and the face beyond
-and its plane came out 3.5-5.3 deg off; 10 mm holds the floor alone (0.03-0.07 deg on a
-recorded view)."""
-NARROW_MAX_ERROR_DEG = 0.1
-"""... taken when the standard error of its plane's normal, predicted from the sensor
-noise measured on it (sigma / (spread x sqrt(points))), is below this. Measured on 6-DoF
-test-object episodes (p10-p90): 0.017-0.023 deg under the stereo profile (`realistic`),
-0.055-0.066 under 1 mm i.i.d. noise (`ideal`), 0.17-0.19 under 3 mm, where the 20 mm
-ring's twice the points and spread halve the error (tilt p90 0.58 against 1.21 deg)."""
+"""... and that plane is grown over the ring this wide (`_grow`), for precision. With the
+20 mm ring alone the face was lost beside a step round the opening (a counterbore's floor
+6 mm below the top face, 2 cm out: 3.5-5.3 deg off) or a step down 5-10 mm from an
+opening's side (the lower level half the ring: 4-8 deg)."""
 RING_BAND = 0.025
 """Only points within this distance of the estimated opening's plane: the face, not the
 floor under an edge. Wide, because OPN's estimate of the opening's height can be 1-2 cm
 off on bodies unlike its training ones (on a flanged pipe 9 cm tall it put the opening
 14-20 mm too low, and a 10 mm band then held no face at all: 4 of 20 inserted in 6-DoF,
 20 of 20 at 25 mm; a hexagonal boss 7 -> 19); the walls and the tops of raised blocks a
-wide band takes in are outliers to the least-median fit while the face holds most of the
-ring."""
+wide band takes in are outliers to the fit, more than INLIER_SIGMAS from the face."""
 MIN_RING_POINTS = 60
+INLIER_SIGMAS = 2.5
+"""A point within this many noise sigmas of a plane is on it."""
+GROW_PASSES = 3
+MIN_SIGMA = 0.0002
+"""The noise taken for a cloud that shows none (a noise-free render's depth steps)."""
 HYPOTHESES = 200
 """Random point triples tried by the least-median-of-squares fit."""
 MAX_TURN_DEG = 20.0
@@ -65,8 +68,7 @@ def rim_normal(
     `opening_radius`: how far the opening reaches from its centre: a round hole's radius,
     a square hole's corner (its half width times sqrt(2)), or, with `square_x` (the square
     opening's x axis), its half width: the ring then follows the square's sides, so it
-    starts next to the opening along them instead of beyond its corners. The ring is
-    NARROW_RING_WIDTH wide where the noise on it allows (`_ring_width`), else RING_WIDTH."""
+    starts next to the opening along them instead of beyond its corners."""
     axis = axis / np.linalg.norm(axis)
     n = _face_normal(points, centre, axis, opening_radius, rng, square_x)
     if n is None and square_x is not None:
@@ -85,49 +87,49 @@ def _face_normal(
     rng: np.random.Generator,
     square_x: np.ndarray | None = None,
 ) -> np.ndarray | None:
-    """rim_normal on one ring: its least-median plane."""
-    width = _ring_width(points, centre, axis, reach + RING_MARGIN, rng, square_x)
+    """rim_normal on one ring shape: the plane of the flattest of the SEED_WIDTHS rings,
+    grown over the RING_WIDTH ring."""
 
-    def ring(normal: np.ndarray) -> np.ndarray:
+    def ring(normal: np.ndarray, width: float = RING_WIDTH) -> np.ndarray:
         return _ring(points, centre, normal, reach + RING_MARGIN, square_x, width)
 
-    n = _two_passes(ring, ring(axis), axis, rng)
+    seeds = [s for s in (_plane_inliers(ring(axis, w), rng) for w in SEED_WIDTHS) if s]
+    if not seeds:
+        return None
+    seed = min(seeds, key=lambda fit: fit[1])
+    n = _grow(ring, *seed, axis)
     if n is None or angle_deg(n, axis) > MAX_TURN_DEG:
         return None
     return n
 
 
-def _two_passes(ring, first: np.ndarray, axis: np.ndarray, rng: np.random.Generator):
-    """The least-median normal of `first` (the ring around `axis`), refitted on the ring
-    cut square to the normal found (`ring(normal)`); None when the first fit finds none. A
-    ring cut across a tilted face keeps, at its edges, only the points whose noise moves
-    them inwards, and that truncation tilts the fit back towards the guess (measured:
-    1.2 deg at 2 mm noise and a 12 deg wrong guess; 0.2 deg after the second pass)."""
-    n = _plane_normal(first, axis, rng)
-    if n is None:
-        return None
-    again = _plane_normal(ring(n), n, rng)
-    return n if again is None else again
+def _grow(ring, inliers: np.ndarray, sigma: float, axis: np.ndarray) -> np.ndarray | None:
+    """The normal of the plane of `inliers` (noise `sigma`), refitted GROW_PASSES times to
+    the points of the wide ring `ring(normal)` within INLIER_SIGMAS of it, the noise
+    measured again on them each time. The ring is cut square to the latest normal: one cut
+    across a tilted face keeps, at its edges, only the points whose noise moves them
+    inwards, and that truncation tilts the fit back towards the guess (measured: 1.2 deg at
+    2 mm noise and a 12 deg wrong guess; 0.2 deg recut). The least-median sigma of a ring a
+    third of which is another surface comes out 1.5-2x the noise; measured again on the
+    inliers it is the noise, so the band stops taking in the chamfer and the step's edge."""
+    n, origin = _plane(inliers, axis)
+    for _ in range(GROW_PASSES):
+        wide = ring(n)
+        r = (wide - origin) @ n
+        near = np.abs(r) <= INLIER_SIGMAS * sigma + 1e-6
+        if np.count_nonzero(near) < MIN_RING_POINTS // 2:
+            break
+        n, origin = _plane(wide[near], axis)
+        sigma = max(robust_sigma(r[near]), MIN_SIGMA)
+    return n
 
 
-def _ring_width(
-    points: np.ndarray,
-    centre: np.ndarray,
-    axis: np.ndarray,
-    inner: float,
-    rng: np.random.Generator,
-    square_x: np.ndarray | None,
-) -> float:
-    """NARROW_RING_WIDTH when the narrow ring's least-median plane is predicted precise
-    enough (NARROW_MAX_ERROR_DEG) from the noise measured on it, else RING_WIDTH."""
-    fit = _plane_inliers(_ring(points, centre, axis, inner, square_x, NARROW_RING_WIDTH), rng)
-    if fit is None:
-        return RING_WIDTH
-    inliers, sigma = fit
-    d = inliers - inliers.mean(axis=0)
-    spread = np.sqrt(np.mean(np.sum(d**2, axis=1)))
-    error = np.degrees(sigma / (spread * np.sqrt(len(inliers))))
-    return NARROW_RING_WIDTH if error < NARROW_MAX_ERROR_DEG else RING_WIDTH
+def _plane(points: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares plane of `points`: (unit normal on `axis`'s side, centroid)."""
+    origin = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - origin, full_matrices=False)
+    n = vt[2]
+    return (n if n @ axis >= 0 else -n), origin
 
 
 def _ring(
@@ -156,7 +158,7 @@ def _plane_inliers(ring: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarr
     """The dominant plane's inliers and the noise measured about it (a robust sigma, m),
     or None with too few points. Least median of squares: the plane through 3 random
     points that leaves the smallest median squared distance; its inliers are the points
-    within 2.5 robust sigmas (sigma from that median: the sensor's noise, whatever the
+    within INLIER_SIGMAS robust sigmas (sigma from that median: the sensor's noise, whatever the
     sensor)."""
     if len(ring) < MIN_RING_POINTS:
         return None
@@ -165,22 +167,10 @@ def _plane_inliers(ring: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarr
         return None
     _, med_best, residual = _least_median(ring, origins, normals)
     sigma = 1.4826 * (1 + 5 / (len(ring) - 3)) * np.sqrt(med_best)
-    inliers = ring[np.abs(residual) <= 2.5 * sigma + 1e-6]
+    inliers = ring[np.abs(residual) <= INLIER_SIGMAS * sigma + 1e-6]
     if len(inliers) < MIN_RING_POINTS // 2:
         return None
     return inliers, float(sigma)
-
-
-def _plane_normal(ring: np.ndarray, axis: np.ndarray, rng: np.random.Generator):
-    """The dominant plane's unit normal (on `axis`'s side), a least-squares fit to the
-    least-median plane's inliers, or None with too few points."""
-    fit = _plane_inliers(ring, rng)
-    if fit is None:
-        return None
-    inliers, _ = fit
-    _, _, vt = np.linalg.svd(inliers - inliers.mean(axis=0), full_matrices=False)
-    n = vt[2]
-    return n if n @ axis >= 0 else -n
 
 
 def _hypotheses(ring: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

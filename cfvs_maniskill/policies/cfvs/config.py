@@ -44,8 +44,8 @@ class CFVSConfig:
     rim_plane: bool = True
     """Refine OPN's estimate by the geometry of the face round the opening it points at
     (`refine`): in 6-DoF the hole's axis becomes the face's normal (perception/rim.py: the
-    narrowest ring round the opening whose noise predicts a normal within 0.1 deg; 3- and
-    4-DoF holes are upright); OPN still gives where the hole is. False: the paper's fine
+    plane of the surface next to the opening; 3- and 4-DoF holes are upright); OPN still
+    gives where the hole is. False: the paper's fine
     stage (the `cfvs_no_rim` ablation)."""
     opening_fit: bool = True
     """With `rim_plane`: place the opening on the face the wrist cloud shows round it (its

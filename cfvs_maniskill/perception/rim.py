@@ -98,12 +98,10 @@ def _face_normal(
         return None
     seed = min(seeds, key=lambda fit: fit[1])
     n = _grow(ring, *seed, axis)
-    if n is None or angle_deg(n, axis) > MAX_TURN_DEG:
-        return None
-    return n
+    return None if angle_deg(n, axis) > MAX_TURN_DEG else n
 
 
-def _grow(ring, inliers: np.ndarray, sigma: float, axis: np.ndarray) -> np.ndarray | None:
+def _grow(ring, inliers: np.ndarray, sigma: float, axis: np.ndarray) -> np.ndarray:
     """The normal of the plane of `inliers` (noise `sigma`), refitted GROW_PASSES times to
     the points of the wide ring `ring(normal)` within INLIER_SIGMAS of it, the noise
     measured again on them each time. The ring is cut square to the latest normal: one cut
@@ -158,8 +156,8 @@ def _plane_inliers(ring: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarr
     """The dominant plane's inliers and the noise measured about it (a robust sigma, m),
     or None with too few points. Least median of squares: the plane through 3 random
     points that leaves the smallest median squared distance; its inliers are the points
-    within INLIER_SIGMAS robust sigmas (sigma from that median: the sensor's noise, whatever the
-    sensor)."""
+    within INLIER_SIGMAS robust sigmas (sigma from that median: the sensor's noise,
+    whatever the sensor)."""
     if len(ring) < MIN_RING_POINTS:
         return None
     origins, normals = _hypotheses(ring, rng)

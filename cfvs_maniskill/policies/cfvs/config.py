@@ -45,8 +45,7 @@ class CFVSConfig:
     """Refine OPN's estimate by the geometry of the face round the opening it points at
     (`refine`): in 6-DoF the hole's axis becomes the face's normal (perception/rim.py: the
     plane of the surface next to the opening; 3- and 4-DoF holes are upright); OPN still
-    gives where the hole is. False: the paper's fine
-    stage (the `cfvs_no_rim` ablation)."""
+    gives where the hole is. False: the paper's fine stage (the `cfvs_no_rim` ablation)."""
     opening_fit: bool = True
     """With `rim_plane`: place the opening on the face the wrist cloud shows round it (its
     shape and size are the task's nominal ones). Coarse: OAKN's estimate moved onto the

@@ -429,14 +429,31 @@ def fixture_body(rng, peg, clearance, folder: Path, name: str):
     """A fixture plate (12-28 cm) or a flange (a disc 12-28 cm across), 3-7 cm thick, the
     opening anywhere on the face, with two or three of `FIXTURE_FEATURES` (an island last:
     what stands beside the opening stands on the face, not at the island's height)."""
+    return _featured_part(
+        rng,
+        peg,
+        clearance,
+        folder,
+        name,
+        thick=(0.03, 0.07),
+        across=(0.12, 0.28),
+        features=FIXTURE_FEATURES,
+        last=(add_island,),
+    )
+
+
+def _featured_part(rng, peg, clearance, folder, name, thick, across, features, last=()):
+    """A plate or disc (`_plate_or_disc`, `across` m) `thick` (m, range) thick with two or
+    three of `features` added, those in `last` after the rest and in that order; None when
+    a part is not joined to the body (it would float): draw again."""
     keep = keep_clear(peg, clearance)
-    top = rng.uniform(0.03, 0.07)
-    mesh, hole = _plate_or_disc(rng, keep, top, (0.12, 0.28))
-    chosen = rng.choice(FIXTURE_FEATURES, size=int(rng.integers(2, 4)), replace=False)
-    for add in sorted(chosen, key=lambda f: f is add_island):  # the rest stand on the face
+    top = rng.uniform(*thick)
+    mesh, hole = _plate_or_disc(rng, keep, top, across)
+    chosen = rng.choice(features, size=int(rng.integers(2, 4)), replace=False)
+    for add in sorted(chosen, key=lambda f: last.index(f) + 1 if f in last else 0):
         mesh, top = add(rng, mesh, hole, top, keep)
     if len(mesh.split(only_watertight=False)) > 1:
-        return None  # a part not joined to the body (it would float): draw again
+        return None
     return _write(mesh, hole, top, folder, name)
 
 
@@ -518,16 +535,17 @@ def housing_body(rng, peg, clearance, folder: Path, name: str):
     """A housing block (10-30 cm) or a disc 10-30 cm across, 3-8 cm thick, the opening
     anywhere on the face, with two or three of `HOUSING_FEATURES` (a tower after what stands
     on the face, a countersink last: it is cut where the opening ends up)."""
-    keep = keep_clear(peg, clearance)
-    top = rng.uniform(0.03, 0.08)
-    mesh, hole = _plate_or_disc(rng, keep, top, (0.10, 0.30))
-    chosen = rng.choice(HOUSING_FEATURES, size=int(rng.integers(2, 4)), replace=False)
-    order = {add_tower: 1, add_countersink: 2}
-    for add in sorted(chosen, key=lambda f: order.get(f, 0)):
-        mesh, top = add(rng, mesh, hole, top, keep)
-    if len(mesh.split(only_watertight=False)) > 1:
-        return None  # a part not joined to the body (it would float): draw again
-    return _write(mesh, hole, top, folder, name)
+    return _featured_part(
+        rng,
+        peg,
+        clearance,
+        folder,
+        name,
+        thick=(0.03, 0.08),
+        across=(0.10, 0.30),
+        features=HOUSING_FEATURES,
+        last=(add_tower, add_countersink),
+    )
 
 
 FAMILIES: dict[str, Draw] = {

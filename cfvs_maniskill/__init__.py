@@ -9,10 +9,14 @@ policy (`policies/`).
 """
 
 import warnings
+from importlib import metadata as _metadata
 
 from cfvs_maniskill.envs.registration import register_tasks as _register_tasks
 
-__version__ = "1.1.0"
+try:  # written once, in pyproject.toml: a release changes no code the records fingerprint
+    __version__ = _metadata.version("cfvs_maniskill")
+except _metadata.PackageNotFoundError:  # a source tree that was never installed
+    __version__ = "0+unknown"
 
 # SAPIEN falls back to its bundled Vulkan loader, which works; its warning only confuses.
 warnings.filterwarnings("ignore", message="Failed to find system libvulkan")

@@ -69,3 +69,14 @@ def test_check_names_the_cells_a_branch_changing_an_agent_leaves_stale(monkeypat
     )
     monkeypatch.setattr(trace, "code_fingerprint", lambda: docs_only)
     assert check(records, [], None) == 0
+
+
+def test_the_version_is_written_once_so_a_release_leaves_records_current():
+    """`__version__` is the installed metadata's, i.e. pyproject.toml's: a release bumps
+    no episode code, so the records made just before it stay current."""
+    import tomllib
+
+    import cfvs_maniskill
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert cfvs_maniskill.__version__ == project["version"]

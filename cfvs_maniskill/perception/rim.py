@@ -93,7 +93,7 @@ def _face_normal(
     def ring(normal: np.ndarray, width: float = RING_WIDTH) -> np.ndarray:
         return _ring(points, centre, normal, reach + RING_MARGIN, square_x, width)
 
-    seeds = [s for s in (_plane_inliers(ring(axis, w), rng) for w in SEED_WIDTHS) if s]
+    seeds = [s for s in (_plane_inliers(ring(axis, w), rng) for w in SEED_WIDTHS) if s is not None]
     if not seeds:
         return None
     seed = min(seeds, key=lambda fit: fit[1])

@@ -572,6 +572,60 @@ def test_housing_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
         procedural_specs(2, 1, "square", 0.004, 0.045, "housings")
 
 
+def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_path):
+    """`manifolds` (release 1.3.0's frozen set): a seal groove, ports, a recess and fittings
+    keep off the opening's wall (the recess lowers the face round it), a round bar keeps a
+    flat land round the opening; training never draws the family."""
+    import trimesh
+
+    from cfvs_maniskill.data import shapes as S
+    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
+
+    keep, top = S.keep_clear("square", 0.004), 0.05
+    plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
+    hole = np.array([0.03, -0.02])
+
+    def wall_ring(body, level, seed):
+        """The surface points within `keep` of the axis: all on the face at `level`."""
+        v, _ = trimesh.sample.sample_surface(body, 40000, seed=seed)
+        ring = (np.linalg.norm(v[:, :2] - hole, axis=1) < keep) & (v[:, 2] > 1e-4)
+        assert ring.sum() > 50 and np.all(np.abs(v[ring, 2] - level) < 1e-6), seed
+
+    for seed in range(4):
+        for add in (S.add_seal_groove, S.add_ports, S.add_fittings, S.add_offset_recess):
+            body, level = add(np.random.default_rng(seed), plate, hole, top, keep)
+            wall_ring(body, level, seed)
+            if add is S.add_fittings:
+                assert body.volume > plate.volume and body.bounds[1, 2] > top + 0.009, seed
+            else:
+                assert body.volume < plate.volume, (add.__name__, seed)
+        _, level = S.add_offset_recess(np.random.default_rng(seed), plate, hole, top, keep)
+        assert top - 0.006 <= level <= top - 0.002, seed
+    bars = 0
+    for seed in range(12):  # a third of the bases are round bars with a flat on top
+        base, at = S._block_or_bar(np.random.default_rng(seed), keep, top, (0.1, 0.3))
+        n = base.face_normals
+        if not np.any((np.abs(n[:, 2]) > 0.2) & (np.abs(n[:, 2]) < 0.995)):
+            continue
+        bars += 1
+        hole = at
+        wall_ring(base, top, seed)
+        assert base.bounds[1, 2] == pytest.approx(top), seed  # the flat is the top
+    assert bars >= 2
+    drawn = [
+        S.manifold_body(np.random.default_rng(s), "square", 0.004, tmp_path, f"m{s}")
+        for s in range(6)
+    ]
+    assert sum(d is not None for d in drawn) >= 3
+    for s, d in enumerate(drawn):
+        if d is not None:
+            body = trimesh.load(tmp_path / f"m{s}.stl")
+            assert body.is_watertight and len(body.split(only_watertight=False)) == 1, s
+    assert "manifolds" not in TRAINING_FAMILIES
+    with pytest.raises(ValueError, match="held out of training"):
+        procedural_specs(2, 1, "square", 0.004, 0.045, "manifolds")
+
+
 def test_a_dataset_can_be_collected_on_another_mount_than_the_profiles():
     """`--mount NAME` puts the camera on a named mount for every scene of the file (KOVIS's
     own mount given way to), and the file says so (a resume must match it)."""

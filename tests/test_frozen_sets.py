@@ -17,6 +17,7 @@ FROZEN_RESULTS = (
     "results/generalisation_plates",
     "results/generalisation_fixtures",
     "results/generalisation_housings",
+    "results/generalisation_manifolds",
 )
 """The results folders of the frozen sets (assets/final, assets/generalisation*)."""
 

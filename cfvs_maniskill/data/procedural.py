@@ -207,6 +207,7 @@ FAMILIES = {
     "plates": "l",
     "fixtures": "x",
     "housings": "h",
+    "manifolds": "m",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

@@ -23,6 +23,11 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   tall, an elongated slot beside it, a bracket (a wall braced by sloped gussets) facing
   it, ribs, a wall. Held out: release 1.2.0's frozen set (`assets/generalisation_housings/`)
   is made of it.
+- `manifolds`: manifold blocks and discs up to 30 cm, or round bars with a flat milled
+  along the top (the surface falling away beside the opening), with two or three of: a
+  face-seal groove round the opening, ports wider than it, hex fittings with bores standing
+  beside it, the opening at one end of a long shallow recess, a wall. Held out: release
+  1.3.0's frozen set (`assets/generalisation_manifolds/`) is made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -442,13 +447,15 @@ def fixture_body(rng, peg, clearance, folder: Path, name: str):
     )
 
 
-def _featured_part(rng, peg, clearance, folder, name, thick, across, features, last=()):
-    """A plate or disc (`_plate_or_disc`, `across` m) `thick` (m, range) thick with two or
+def _featured_part(
+    rng, peg, clearance, folder, name, thick, across, features, last=(), base=_plate_or_disc
+):
+    """A `base` body (`_plate_or_disc`, `across` m) `thick` (m, range) thick with two or
     three of `features` added, those in `last` after the rest and in that order; None when
     a part is not joined to the body (it would float): draw again."""
     keep = keep_clear(peg, clearance)
     top = rng.uniform(*thick)
-    mesh, hole = _plate_or_disc(rng, keep, top, across)
+    mesh, hole = base(rng, keep, top, across)
     chosen = rng.choice(features, size=int(rng.integers(2, 4)), replace=False)
     for add in sorted(chosen, key=lambda f: last.index(f) + 1 if f in last else 0):
         mesh, top = add(rng, mesh, hole, top, keep)
@@ -548,6 +555,108 @@ def housing_body(rng, peg, clearance, folder: Path, name: str):
     )
 
 
+def _block_or_bar(rng, keep: float, top: float, across: tuple[float, float]):
+    """A plate or disc (`_plate_or_disc`), or a third of the time a round bar with a flat
+    milled along its top: a land 2-10 mm wider than the opening's wall each side, the bar's
+    surface falling away round beyond it (radius 5-20 cm): (mesh, hole x y)."""
+    if rng.random() < 2 / 3:
+        return _plate_or_disc(rng, keep, top, across)
+    length, width = rng.uniform(*across), rng.uniform(max(across[0], 4 * keep), across[1])
+    radius = rng.uniform(max(0.05, top), 0.2)  # its lowest point under the table: a bar
+    land = keep + rng.uniform(0.002, 0.01)  # half the flat's width
+    hole = np.array([(length / 2 - keep) * rng.uniform(-0.9, 0.9), 0.0])
+    hole[1] = (width / 2 - land) * rng.uniform(-0.8, 0.8)
+    rise = radius - np.sqrt(radius**2 - land**2)  # the round's top above the land
+    bar = trimesh.creation.cylinder(radius, length + 0.01, 128)
+    bar.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
+    bar.apply_translation([0, hole[1], top + rise - radius])
+    block = box_at([length, width, top], [0, 0, top / 2])
+    return trimesh.boolean.intersection([block, bar], engine="manifold"), hole
+
+
+def add_seal_groove(rng, mesh, hole, top, keep):
+    """A face-seal (O-ring) groove round the opening: a ring 2-4 mm wide and 1.5-4 mm deep,
+    its inner edge 2-8 mm outside the opening's wall."""
+    inner = keep + rng.uniform(0.002, 0.008)
+    width, depth = rng.uniform(0.002, 0.004), rng.uniform(0.0015, 0.004)
+    ring = trimesh.creation.annulus(inner, inner + width, 2 * depth, sections=96)
+    ring.apply_translation([*hole, top])
+    return _minus(mesh, [ring]), top
+
+
+def add_ports(rng, mesh, hole, top, keep):
+    """One to three round ports wider than the opening (1.15-1.6 times its width), 1-4 cm
+    deep, 1-5 cm from its wall, where the face holds them whole."""
+    half = (keep - MIN_WALL) / np.sqrt(2)  # the opening's half width
+    cuts = []
+    for _ in range(int(rng.integers(1, 4))):
+        r = half * rng.uniform(1.15, 1.6)
+        c = hole + _unit(rng.uniform(0, 2 * np.pi)) * (keep + r + rng.uniform(0.01, 0.05))
+        if not _solid_under(mesh, c, r, top):
+            continue  # off the face's edge
+        cut = trimesh.creation.cylinder(r, 2 * rng.uniform(0.01, 0.04), 64)
+        cut.apply_translation([*c, top])
+        cuts.append(cut)
+    return _minus(mesh, cuts), top
+
+
+def add_fittings(rng, mesh, hole, top, keep):
+    """One or two hex fittings standing 1-4 cm from the opening's wall: 14-30 mm across
+    the corners, 1-4 cm tall, each with a bore 0.3-0.6 times as wide down its middle (an
+    opening above the face)."""
+    fittings, wanted = [], int(rng.integers(1, 3))
+    for _ in range(8 * wanted):
+        r, h = rng.uniform(0.007, 0.015), rng.uniform(0.01, 0.04)
+        c = hole + _unit(rng.uniform(0, 2 * np.pi)) * (keep + r + rng.uniform(0.01, 0.04))
+        if not _solid_under(mesh, c, r / 2, top - 0.01):
+            continue  # it stands on the part (a curved top included), not beyond its edge
+        hexagon = trimesh.creation.cylinder(r, h + 0.012, 6)
+        hexagon.apply_translation([*c, top + (h - 0.012) / 2])
+        bore = trimesh.creation.cylinder(r * rng.uniform(0.3, 0.6), 2 * h, 32)
+        bore.apply_translation([*c, top + h])
+        fittings.append(_minus(hexagon, [bore]))
+        if len(fittings) == wanted:
+            break
+    return _union([mesh, *fittings]), top
+
+
+def add_offset_recess(rng, mesh, hole, top, keep):
+    """The opening at one end of a long shallow recess with rounded ends, 2-6 mm deep, 2-8 mm
+    wider than the opening's wall and running 2-6 cm the other way: the step close on one
+    side of the opening, far on another."""
+    r, d = keep + rng.uniform(0.002, 0.008), rng.uniform(0.002, 0.006)
+    length, turn = rng.uniform(0.02, 0.06), rng.uniform(0, 2 * np.pi)
+    far = hole + _unit(turn) * length
+    ends = []
+    for c in (hole, far):
+        end = trimesh.creation.cylinder(r, 2 * d, 64)
+        end.apply_translation([*c, top])
+        ends.append(end)
+    middle = box_at([length, 2 * r, 2 * d], [*(hole + far) / 2, top], turn)
+    return _minus(mesh, [_union([middle, *ends])]), top - d
+
+
+MANIFOLD_FEATURES = (add_ports, add_fittings, add_wall, add_offset_recess, add_seal_groove)
+
+
+def manifold_body(rng, peg, clearance, folder: Path, name: str):
+    """A manifold block or disc (10-30 cm) or a round bar with a milled flat, 4-10 cm thick,
+    the opening anywhere on the face, with two or three of `MANIFOLD_FEATURES` (a recess
+    after what stands on the face, the seal groove last: both cut where the opening is)."""
+    return _featured_part(
+        rng,
+        peg,
+        clearance,
+        folder,
+        name,
+        thick=(0.04, 0.10),
+        across=(0.10, 0.30),
+        features=MANIFOLD_FEATURES,
+        last=(add_offset_recess, add_seal_groove),
+        base=_block_or_bar,
+    )
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
@@ -557,6 +666,7 @@ FAMILIES: dict[str, Draw] = {
     "plates": plate_body,
     "fixtures": fixture_body,
     "housings": housing_body,
+    "manifolds": manifold_body,
 }
-HELD_OUT_FAMILIES = ("composite", "grooved", "plates", "fixtures", "housings")
+HELD_OUT_FAMILIES = ("composite", "grooved", "plates", "fixtures", "housings", "manifolds")
 """Never drawn for training: the frozen generalisation sets' families."""

@@ -528,6 +528,26 @@ def test_fixture_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
         procedural_specs(2, 1, "square", 0.004, 0.045, "fixtures")
 
 
+def assert_drawn_whole_and_held_out(family: str, tmp_path, at_least: int) -> None:
+    """Of six draws of a frozen set's `family`, at least `at_least` give a body, each one
+    watertight piece; training refuses the family."""
+    import trimesh
+
+    from cfvs_maniskill.data import shapes as S
+    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
+
+    draw = S.FAMILIES[family]
+    drawn = [draw(np.random.default_rng(s), "square", 0.004, tmp_path, f"b{s}") for s in range(6)]
+    assert sum(d is not None for d in drawn) >= at_least
+    for s, d in enumerate(drawn):
+        if d is not None:
+            body = trimesh.load(tmp_path / f"b{s}.stl")
+            assert body.is_watertight and len(body.split(only_watertight=False)) == 1, s
+    assert family not in TRAINING_FAMILIES
+    with pytest.raises(ValueError, match="held out of training"):
+        procedural_specs(2, 1, "square", 0.004, 0.045, family)
+
+
 def test_housing_features_stand_where_they_say_and_the_family_is_held_out(tmp_path):
     """`housings` (release 1.2.0's frozen set): a countersink slopes round the opening and
     puts the frame where the cone meets it, a tower lifts the opening 4-12 cm, a slot and a
@@ -535,7 +555,6 @@ def test_housing_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
     import trimesh
 
     from cfvs_maniskill.data import shapes as S
-    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
 
     keep, top = S.keep_clear("square", 0.004), 0.05
     plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
@@ -558,18 +577,7 @@ def test_housing_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
             v, _ = trimesh.sample.sample_surface(body, 20000, seed=seed)
             ring = (np.linalg.norm(v[:, :2] - hole, axis=1) < keep) & (v[:, 2] > 1e-4)
             assert ring.sum() > 100 and np.all(np.abs(v[ring, 2] - top) < 1e-6), seed
-    drawn = [
-        S.housing_body(np.random.default_rng(s), "square", 0.004, tmp_path, f"h{s}")
-        for s in range(6)
-    ]
-    assert sum(d is not None for d in drawn) >= 4
-    for s, d in enumerate(drawn):
-        if d is not None:
-            body = trimesh.load(tmp_path / f"h{s}.stl")
-            assert body.is_watertight and len(body.split(only_watertight=False)) == 1, s
-    assert "housings" not in TRAINING_FAMILIES
-    with pytest.raises(ValueError, match="held out of training"):
-        procedural_specs(2, 1, "square", 0.004, 0.045, "housings")
+    assert_drawn_whole_and_held_out("housings", tmp_path, at_least=4)
 
 
 def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_path):
@@ -579,7 +587,6 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
     import trimesh
 
     from cfvs_maniskill.data import shapes as S
-    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
 
     keep, top = S.keep_clear("square", 0.004), 0.05
     plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
@@ -612,18 +619,7 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
         wall_ring(base, top, seed)
         assert base.bounds[1, 2] == pytest.approx(top), seed  # the flat is the top
     assert bars >= 2
-    drawn = [
-        S.manifold_body(np.random.default_rng(s), "square", 0.004, tmp_path, f"m{s}")
-        for s in range(6)
-    ]
-    assert sum(d is not None for d in drawn) >= 3
-    for s, d in enumerate(drawn):
-        if d is not None:
-            body = trimesh.load(tmp_path / f"m{s}.stl")
-            assert body.is_watertight and len(body.split(only_watertight=False)) == 1, s
-    assert "manifolds" not in TRAINING_FAMILIES
-    with pytest.raises(ValueError, match="held out of training"):
-        procedural_specs(2, 1, "square", 0.004, 0.045, "manifolds")
+    assert_drawn_whole_and_held_out("manifolds", tmp_path, at_least=3)
 
 
 def test_a_dataset_can_be_collected_on_another_mount_than_the_profiles():

@@ -528,6 +528,17 @@ def test_fixture_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
         procedural_specs(2, 1, "square", 0.004, 0.045, "fixtures")
 
 
+def assert_wall_ring_at(body, hole, keep, level, seed, samples: int, more_than: int) -> None:
+    """The opening's wall stays whole: of `samples` surface points of `body`, those within
+    `keep` of the axis at `hole` (x, y) and above the table, more than `more_than`, all lie
+    on the face at `level`."""
+    import trimesh
+
+    v, _ = trimesh.sample.sample_surface(body, samples, seed=seed)
+    ring = (np.linalg.norm(v[:, :2] - hole, axis=1) < keep) & (v[:, 2] > 1e-4)
+    assert ring.sum() > more_than and np.all(np.abs(v[ring, 2] - level) < 1e-6), seed
+
+
 def assert_drawn_whole_and_held_out(family: str, tmp_path, at_least: int) -> None:
     """Of six draws of a frozen set's `family`, at least `at_least` give a body, each one
     watertight piece; training refuses the family."""
@@ -552,7 +563,6 @@ def test_housing_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
     """`housings` (release 1.2.0's frozen set): a countersink slopes round the opening and
     puts the frame where the cone meets it, a tower lifts the opening 4-12 cm, a slot and a
     bracket keep off the opening's wall; training never draws the family."""
-    import trimesh
 
     from cfvs_maniskill.data import shapes as S
 
@@ -574,9 +584,7 @@ def test_housing_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
         n = bracket.face_normals
         assert np.any((np.abs(n[:, 2]) > 0.2) & (np.abs(n[:, 2]) < 0.995)), seed  # gussets
         for body in (slot, bracket):  # nothing over or cut into the opening's wall
-            v, _ = trimesh.sample.sample_surface(body, 20000, seed=seed)
-            ring = (np.linalg.norm(v[:, :2] - hole, axis=1) < keep) & (v[:, 2] > 1e-4)
-            assert ring.sum() > 100 and np.all(np.abs(v[ring, 2] - top) < 1e-6), seed
+            assert_wall_ring_at(body, hole, keep, top, seed, samples=20000, more_than=100)
     assert_drawn_whole_and_held_out("housings", tmp_path, at_least=4)
 
 
@@ -584,7 +592,6 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
     """`manifolds` (release 1.3.0's frozen set): a seal groove, ports, a recess and fittings
     keep off the opening's wall (the recess lowers the face round it), a round bar keeps a
     flat land round the opening; training never draws the family."""
-    import trimesh
 
     from cfvs_maniskill.data import shapes as S
 
@@ -592,16 +599,10 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
     plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
     hole = np.array([0.03, -0.02])
 
-    def wall_ring(body, level, seed):
-        """The surface points within `keep` of the axis: all on the face at `level`."""
-        v, _ = trimesh.sample.sample_surface(body, 40000, seed=seed)
-        ring = (np.linalg.norm(v[:, :2] - hole, axis=1) < keep) & (v[:, 2] > 1e-4)
-        assert ring.sum() > 50 and np.all(np.abs(v[ring, 2] - level) < 1e-6), seed
-
     for seed in range(4):
         for add in (S.add_seal_groove, S.add_ports, S.add_fittings, S.add_offset_recess):
             body, level = add(np.random.default_rng(seed), plate, hole, top, keep)
-            wall_ring(body, level, seed)
+            assert_wall_ring_at(body, hole, keep, level, seed, samples=40000, more_than=50)
             if add is S.add_fittings:
                 assert body.volume > plate.volume and body.bounds[1, 2] > top + 0.009, seed
             else:
@@ -615,8 +616,7 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
         if not np.any((np.abs(n[:, 2]) > 0.2) & (np.abs(n[:, 2]) < 0.995)):
             continue
         bars += 1
-        hole = at
-        wall_ring(base, top, seed)
+        assert_wall_ring_at(base, at, keep, top, seed, samples=40000, more_than=50)
         assert base.bounds[1, 2] == pytest.approx(top), seed  # the flat is the top
     assert bars >= 2
     assert_drawn_whole_and_held_out("manifolds", tmp_path, at_least=3)

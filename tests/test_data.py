@@ -622,6 +622,37 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
     assert_drawn_whole_and_held_out("manifolds", tmp_path, at_least=3)
 
 
+def test_stands_raise_the_opening_or_stand_beside_it_and_are_a_training_family(tmp_path):
+    """`stands` (a training family): posts keep off the opening's wall, stand 1-13 cm tall
+    and some carry a bore; most bodies put the opening on a riser above the rest of the
+    face, so the tallest thing in view is often, not always, what holds it."""
+    import trimesh
+    import yaml
+
+    from cfvs_maniskill.data import shapes as S
+    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
+
+    keep, top = S.keep_clear("square", 0.004), 0.05
+    plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
+    hole = np.array([0.03, -0.02])
+    for seed in range(8):
+        posts, level = S.add_posts(np.random.default_rng(seed), plate, hole, top, keep)
+        assert level == top and top + 0.009 < posts.bounds[1, 2] <= top + 0.13, seed
+        assert_wall_ring_at(posts, hole, keep, top, seed, samples=40000, more_than=50)
+    assert "stands" in TRAINING_FAMILIES
+    folder, names = procedural_specs(6, 5, "square", 0.004, 0.045, "stands", folder=tmp_path)
+    raised = 0
+    for name in names:
+        spec = yaml.safe_load((folder / f"{name}.yaml").read_text())
+        body = trimesh.load(folder / spec["body"]["mesh"]["file"])
+        z = spec["hole_frame"]["origin"][2]
+        assert body.is_watertight and len(body.split(only_watertight=False)) == 1, name
+        up = body.face_normals[:, 2] > 0.99  # the faces looking up: the opening's is small
+        at = np.abs(body.triangles_center[:, 2] - z) < 1e-4
+        raised += body.area_faces[up & at].sum() < 0.5 * body.area_faces[up].sum()
+    assert 2 <= raised <= 6, raised
+
+
 def test_a_dataset_can_be_collected_on_another_mount_than_the_profiles():
     """`--mount NAME` puts the camera on a named mount for every scene of the file (KOVIS's
     own mount given way to), and the file says so (a resume must match it)."""

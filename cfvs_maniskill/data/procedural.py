@@ -208,6 +208,7 @@ FAMILIES = {
     "fixtures": "x",
     "housings": "h",
     "manifolds": "m",
+    "stands": "s",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

@@ -29,6 +29,12 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   beside it, the opening at one end of a long shallow recess, a wall. Held out: release
   1.3.0's frozen set (`assets/generalisation_manifolds/`) is made of it.
 
+- `stands`: plates and discs 8-30 cm across carrying posts and blocks 1-13 cm tall (some
+  with a bore of another size in their top), walls, ribs, pockets or a step, and most of
+  the time the opening itself on a riser 1-13 cm above the face: the opening need not be
+  on the body's largest face, and a tall thing beside it need not hold it. A training
+  family: the coarse network's bodies otherwise never raise the opening above the rest.
+
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
 """
@@ -657,6 +663,49 @@ def manifold_body(rng, peg, clearance, folder: Path, name: str):
     )
 
 
+def add_posts(rng, mesh, hole, top, keep):
+    """One to three posts or blocks 1-13 cm tall and 1-6 cm across, 1-8 cm from the
+    opening's wall, a third of them with a blind bore (0.6-1.5 times the opening's half
+    width) in their top: tall things beside the opening that do not hold it."""
+    half, parts, cuts = keep - MIN_WALL, [], []
+    for _ in range(int(rng.integers(1, 4))):
+        r, h = rng.uniform(0.005, 0.03), rng.uniform(0.01, 0.13)
+        c = hole + _unit(rng.uniform(0, 2 * np.pi)) * (
+            keep + r * np.sqrt(2) + rng.uniform(0.01, 0.08)
+        )
+        if rng.random() < 0.5:
+            post = trimesh.creation.cylinder(r, h + 0.002, 48)
+            post.apply_translation([*c, top + h / 2 - 0.001])
+        else:
+            post = box_at([2 * r, 2 * r, h + 0.002], [*c, top + h / 2 - 0.001], rng.uniform(0, 1))
+        parts.append(post)
+        bore = half * rng.choice([rng.uniform(0.6, 0.85), rng.uniform(1.15, 1.5)])
+        if rng.random() < 1 / 3 and bore + MIN_WALL < r:
+            cut = trimesh.creation.cylinder(bore, 2 * min(0.03, 0.8 * h), 48)
+            cut.apply_translation([*c, top + h])
+            cuts.append(cut)
+    return _minus(_union([mesh, *parts]), cuts), top
+
+
+STAND_FEATURES = (add_posts, add_wall, add_ribs, add_pockets, add_step)
+
+
+def stand_body(rng, peg, clearance, folder: Path, name: str):
+    """A plate or disc 8-30 cm across, 2-8 cm thick, the opening anywhere on it, with one to
+    three of `STAND_FEATURES`, and three times in four the opening on a riser 1-13 cm tall
+    (3-30 mm wider than its wall) put up after them."""
+    keep = keep_clear(peg, clearance)
+    top = rng.uniform(0.02, 0.08)
+    mesh, hole = _plate_or_disc(rng, keep, top, (0.08, 0.30))
+    for add in rng.choice(STAND_FEATURES, size=int(rng.integers(1, 4)), replace=False):
+        mesh, top = add(rng, mesh, hole, top, keep)
+    if rng.random() < 0.75:
+        mesh, top = _raise_opening(rng, mesh, hole, top, keep, (0.01, 0.13), (0.003, 0.03))
+    if len(mesh.split(only_watertight=False)) > 1:
+        return None
+    return _write(mesh, hole, top, folder, name)
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
@@ -667,6 +716,7 @@ FAMILIES: dict[str, Draw] = {
     "fixtures": fixture_body,
     "housings": housing_body,
     "manifolds": manifold_body,
+    "stands": stand_body,
 }
 HELD_OUT_FAMILIES = ("composite", "grooved", "plates", "fixtures", "housings", "manifolds")
 """Never drawn for training: the frozen generalisation sets' families."""

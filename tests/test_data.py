@@ -667,3 +667,28 @@ def test_a_dataset_can_be_collected_on_another_mount_than_the_profiles():
         assert file_attrs(args, task)["mount"] == "flange_side"
     assert "camera_mount" not in Collector(CollectArgs(kind="fine"), task).env_kwargs()
     assert "mount" not in file_attrs(CollectArgs(kind="fine"), task)
+
+
+def test_a_body_no_start_pose_reaches_is_drawn_again_not_the_end_of_the_file(monkeypatch):
+    """A scene the robot cannot start in (a tall post where the peg would start) makes that
+    draw unusable (None: the next draw takes another body); any other error still stops."""
+    from types import SimpleNamespace
+
+    from cfvs_maniskill import resources
+    from cfvs_maniskill.data.collect import CollectArgs, Collector
+    from cfvs_maniskill.envs.task_config import load_task
+
+    task = load_task(resources.bundled("tasks") / "PegInsert6DoF.yaml")
+    collector = Collector(CollectArgs(kind="coarse"), task)
+    failure = RuntimeError("no reachable scene in 100 tries for procs_1_0001")
+
+    def reset(seed, options):
+        raise failure
+
+    env = SimpleNamespace(unwrapped=SimpleNamespace(defer_obs=False), reset=reset)
+    monkeypatch.setattr(collector, "_env_for", lambda group: env)
+    assert collector.sample(0) is None
+    assert env.unwrapped.defer_obs is False
+    failure = RuntimeError("the renderer died")
+    with pytest.raises(RuntimeError, match="renderer died"):
+        collector.sample(0)

@@ -12,6 +12,7 @@ import dataclasses
 import importlib
 import importlib.util
 import json
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -209,6 +210,12 @@ class Collector:
         u.defer_obs = self.kind.moves_first  # no start view rendered that nobody looks at
         try:
             obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)), options={"object": obj})
+        except RuntimeError as e:
+            if not str(e).startswith("no reachable scene"):
+                raise
+            # e.g. a tall post where the start pose would be: the next draw, another body
+            print(f"sample {i} draw {draw}: {e}; drawing again", file=sys.stderr)
+            return None
         finally:
             u.defer_obs = False
         return self.kind.draw(args, task, u, obs, u.hole_pose.copy(), rng, i)

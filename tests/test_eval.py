@@ -743,3 +743,33 @@ def test_a_record_on_a_mount_with_its_own_weights_is_checked_against_them():
     assert "agents/cfvs/round/opnv.tip_view_long.pt" in long
     assert "agents/cfvs/round/opnv.pt" in usual and long != usual
     assert agent_weights_today("cfvs", "PegInsert3DoF", "my_bracket") == usual
+
+
+def test_a_run_over_cameras_on_two_mounts_resumes_and_other_weights_are_named():
+    """A folder holding d435 episodes (the `tip_view_long` mount, whose fine network is its
+    own) beside ideal ones resumes: each record is judged against the weights the agent
+    loads on its record's mount; a record made with other weights there is named."""
+    from cfvs_maniskill import TASKS
+    from cfvs_maniskill.eval.__main__ import unbuildable
+    from cfvs_maniskill.eval.jobs import scene_seed
+    from cfvs_maniskill.eval.settings import Settings, differences
+    from cfvs_maniskill.report.trace import agent_weights_today
+    from cfvs_maniskill.robots.mounts import MOUNTS
+
+    task = "PegInsert3DoF"
+    now = Settings(seed=0, search_radius=0.0)
+    mounts = (MOUNTS["tip_view"], MOUNTS["tip_view_long"])
+    assert unbuildable(["cfvs"], {task: TASKS[task]}, now.weights, mounts) == set()
+    long, usual = (agent_weights_today("cfvs", task, m.name) for m in mounts[::-1])
+    assert long != usual and now.weights[(task, "cfvs", "tip_view_long")] == long
+
+    def record(sensor: str, mount: str, weights: dict) -> tuple[str, dict]:
+        key = f"{task}|cfvs|cylinder|large|0|{sensor}"
+        seed = scene_seed(task, "cylinder", "large", 0, 0)
+        return key, {"seed": seed, "mount": mount, "provenance": {"weights": weights}}
+
+    done = dict([record("ideal", "tip_view", usual), record("d435", "tip_view_long", long)])
+    assert differences(done, now) == []
+    done = dict([record("d435", "tip_view_long", usual)])
+    (why,) = differences(done, now)
+    assert "agent cfvs on PegInsert3DoF: its weights" in why and "tip_view_long" in why

@@ -120,12 +120,16 @@ def resolve(args: EvalArgs, tasks: dict | None = None) -> dict[str, list[str]]:
 
 
 def unbuildable(
-    agents: list[str], tasks: dict, weights: dict[tuple[str, str], dict] | None = None
+    agents: list[str],
+    tasks: dict,
+    weights: dict[tuple[str, str, str], dict] | None = None,
+    mounts: tuple = (),
 ) -> set[tuple[str, str]]:
     """(task, agent) pairs whose agent cannot be built for the task (e.g. no trained
     weights for its peg): each skipped with one line saying why; an agent that can run
     none of the tasks -> exit 2. `tasks`: name -> TaskConfig. `weights`, when given, gets
-    the weights files each (task, agent) loads (settings.Settings.weights)."""
+    the weights files each (task, agent) loads with its camera on each of `mounts` (the
+    sensors' mounts, robots/mounts.Mount; settings.Settings.weights)."""
     from cfvs_maniskill.nets.checkpoint import WeightsError
     from cfvs_maniskill.policies.interface import TaskSpec
     from cfvs_maniskill.policies.registry import PRIVILEGED, resolve_agent
@@ -138,8 +142,7 @@ def unbuildable(
         reasons = []
         for t, cfg in tasks.items():
             try:
-                with track_weights() as loaded:
-                    resolve_agent(a)(TaskSpec.of(cfg))
+                resolve_agent(a)(TaskSpec.of(cfg))
             except WeightsError as e:
                 print(f"skipping {t} x {a}: {e}")
                 skip.add((t, a))
@@ -148,7 +151,13 @@ def unbuildable(
             except Exception:  # a bug in the agent: each of its episodes records it
                 continue
             if weights is not None:
-                weights[(t, a)] = dict(sorted(loaded.items()))
+                for mount in mounts:
+                    try:
+                        with track_weights() as on_mount:
+                            resolve_agent(a)(TaskSpec.of(cfg, mount))
+                    except Exception:  # its episodes on that mount record why
+                        continue
+                    weights[(t, a, mount.name)] = dict(sorted(on_mount.items()))
         if tasks and len(reasons) == len(tasks):
             _fail(f"agent '{a}' can run none of the tasks {list(tasks)}: {reasons[0]}")
     return skip
@@ -185,6 +194,7 @@ def main(args: EvalArgs) -> int:
     from cfvs_maniskill.eval.settings import Settings, differences
     from cfvs_maniskill.eval.worker import WorkerConfig
     from cfvs_maniskill.provenance import sha256
+    from cfvs_maniskill.sensing.profile import load_profile
 
     configs = find_tasks(args.tasks)
     objects = resolve(args, configs)
@@ -198,7 +208,8 @@ def main(args: EvalArgs) -> int:
         sensors={name: sha256(file) for name, (_, file) in files.items()},
         tasks={name: sha256(c.source) for name, c in tasks.items()},
     )
-    skip = unbuildable(list(args.agents), tasks, now.weights)
+    mounts = {m.name: m for m in (load_profile(f).camera_mount for _, f in files.values())}
+    skip = unbuildable(list(args.agents), tasks, now.weights, tuple(mounts.values()))
     jobs = make_jobs(
         objects,
         list(args.agents),

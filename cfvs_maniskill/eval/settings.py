@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from cfvs_maniskill.eval.jobs import scene_seed
+from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT
 
 
 @dataclass
@@ -19,8 +20,9 @@ class Settings:
     """Sensor profile name -> sha256 of its file."""
     tasks: dict[str, str] = field(default_factory=dict)
     """Task name -> sha256 of its file."""
-    weights: dict[tuple[str, str], dict[str, str]] = field(default_factory=dict)
-    """(task, agent) -> {weights file: sha256} the agent loads (agents that load none: {})."""
+    weights: dict[tuple[str, str, str], dict[str, str]] = field(default_factory=dict)
+    """(task, agent, camera mount) -> {weights file: sha256} the agent loads with its camera
+    on that mount (agents that load none: {}): an agent may load weights trained for it."""
 
 
 def differences(done: dict[str, dict], now: Settings) -> list[str]:
@@ -55,7 +57,7 @@ def differences(done: dict[str, dict], now: Settings) -> list[str]:
                     f"{kind} '{name}': its file ({entry.get('file')}) is not the one that made "
                     f"the records (sha256 {entry['sha256'][:12]}, now {current[name][:12]})",
                 )
-        expected = now.weights.get((task, agent))
+        expected = now.weights.get((task, agent, rec.get("mount") or DEFAULT_MOUNT))
         if "weights" in prov and expected is not None and prov["weights"] != expected:
             found.setdefault(
                 f"weights:{agent}",

@@ -623,9 +623,9 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
 
 
 def test_stands_raise_the_opening_or_stand_beside_it_and_are_a_training_family(tmp_path):
-    """`stands` (a training family): posts keep off the opening's wall, stand 1-13 cm tall
-    and some carry a bore; most bodies put the opening on a riser above the rest of the
-    face, so the tallest thing in view is often, not always, what holds it."""
+    """`stands` (a training family): posts keep off the opening's wall and stand 1-13 cm
+    tall; most bodies put the opening on a riser above the rest of the face, so the tallest
+    thing in view is often, not always, what holds it."""
     import trimesh
     import yaml
 

@@ -28,7 +28,6 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   face-seal groove round the opening, ports wider than it, hex fittings with bores standing
   beside it, the opening at one end of a long shallow recess, a wall. Held out: release
   1.3.0's frozen set (`assets/generalisation_manifolds/`) is made of it.
-
 - `stands`: plates and discs 8-30 cm across carrying posts and blocks 1-13 cm tall (some
   with a bore of another size in their top), walls, ribs, pockets or a step, and most of
   the time the opening itself on a riser 1-13 cm above the face: the opening need not be

@@ -12,12 +12,15 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import tyro
 
 from cfvs_maniskill.cli import fail as _fail
 from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
+
+if TYPE_CHECKING:
+    from cfvs_maniskill.robots.mounts import Mount
 
 
 @dataclass
@@ -123,7 +126,7 @@ def unbuildable(
     agents: list[str],
     tasks: dict,
     weights: dict[tuple[str, str, str], dict] | None = None,
-    mounts: tuple = (),
+    mounts: tuple[Mount, ...] = (),
 ) -> set[tuple[str, str]]:
     """(task, agent) pairs whose agent cannot be built for the task (e.g. no trained
     weights for its peg): each skipped with one line saying why; an agent that can run

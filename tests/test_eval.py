@@ -626,10 +626,12 @@ def test_agent_task_pairs_without_weights_are_skipped_with_a_line(capsys, monkey
 
 def test_compressed_records_are_read_and_a_resumed_run_appends_beside_them(tmp_path):
     """Finished runs are kept as episodes.jsonl.gz in the repository: the report reads
-    them, and a resumed run counts them done and appends new records beside them."""
+    them, a resumed run counts them done and appends new records beside them, and once it
+    is finished folds them into the compressed file (compressing `episodes.jsonl` again
+    would otherwise put the new records in place of the old)."""
     import gzip
 
-    from cfvs_maniskill.eval.results import append, read_done
+    from cfvs_maniskill.eval.results import append, fold_into_compressed, read_done
     from cfvs_maniskill.report.load import load_records
 
     lines = gzip.decompress((ROOT / "results/cfvs_ablations/episodes.jsonl.gz").read_bytes())
@@ -644,6 +646,13 @@ def test_compressed_records_are_read_and_a_resumed_run_appends_beside_them(tmp_p
     done = read_done(path)
     assert len(done) == 11 and records[10]["key"] in done
     assert len(load_records(run)) == 11
+    fold_into_compressed(path)
+    assert not path.exists() and sorted(read_done(path)) == sorted(done)
+    assert len(gzip.decompress((run / "episodes.jsonl.gz").read_bytes()).splitlines()) == 11
+    append(path, {**records[11]})  # resumed again, and killed after the fold's rename
+    fold_into_compressed(path)
+    append(path, {**records[11]})
+    assert len(read_done(path)) == 12 and len(load_records(run)) == 12
 
 
 @pytest.mark.parametrize(

@@ -254,7 +254,7 @@ def _evaluate(args: EvalArgs, jobs, path: Path, done: dict, cfg, now) -> int:
     from cfvs_maniskill.errors import FileFieldError
     from cfvs_maniskill.eval.crash import JobError
     from cfvs_maniskill.eval.local import BACKENDS
-    from cfvs_maniskill.eval.results import ResultsError, append
+    from cfvs_maniskill.eval.results import ResultsError, append, fold_into_compressed
     from cfvs_maniskill.eval.summary import write_summary
 
     if args.retry_crashed:
@@ -295,6 +295,7 @@ def _evaluate(args: EvalArgs, jobs, path: Path, done: dict, cfg, now) -> int:
         steady = (len(todo) - started) / max(time.perf_counter() - t_first, 1e-9)
         line += f"; {steady:.2f} episodes/s once every worker had started"
     print(line + ")")
+    fold_into_compressed(path)
     summary = write_summary(path, args.out / "summary.md", asdict(args), now)
     print(summary)
     return 0

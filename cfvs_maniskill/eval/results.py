@@ -82,6 +82,21 @@ def read_done(path: Path) -> dict[str, dict]:
     return done
 
 
+def fold_into_compressed(path: Path) -> None:
+    """A finished run resumed on a compressed folder: its new records in `path` join the
+    compressed file (written aside, then renamed over it) and `path` goes, so that
+    compressing the folder again cannot put the new records in place of the old."""
+    gz = compressed(path)
+    if not (gz.exists() and path.exists()):
+        return
+    old = read_text(gz)
+    text = old + ("\n" if old and not old.endswith("\n") else "") + path.read_text()
+    tmp = gz.with_name(gz.name + ".tmp")
+    tmp.write_bytes(gzip.compress(text.encode(), compresslevel=9, mtime=0))
+    os.replace(tmp, gz)  # a kill before the unlink leaves records in both: read once by key
+    path.unlink()
+
+
 def append(path: Path, record: dict) -> None:
     """Append one record, or leave the file exactly as it was: a failed write (disk full,
     file-size limit) is cut back off, so the file never holds half a line."""

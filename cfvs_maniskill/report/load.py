@@ -86,13 +86,19 @@ def load_records(
     known = set(load_library(assets).specs)
     out, other = [], 0
     crashed = [] if crashed is None else crashed
-    for f in sorted([*root.rglob("*.jsonl"), *root.rglob("*.jsonl.gz")]):
+    files = [*root.rglob("*.jsonl"), *root.rglob("*.jsonl.gz")]
+    # A folder's compressed records first, then what a resumed run appended beside them.
+    files.sort(key=lambda f: (str(f.parent), f.suffix != ".gz", f.name))
+    by_folder: dict[Path, dict] = {}
+    for f in files:
         if "archive" in f.relative_to(root).parts[:-1]:
             continue  # earlier measurements kept for the record (other code, settings)
-        folder = f.parent.name if f.parent != root else None
-        by_key: dict = {}  # an eval's job re-run (--retry-crashed) replaces its record
+        by_key = by_folder.setdefault(f.parent, {})
         for i, rec in _parse(f):
-            by_key[rec.get("key", i)] = rec
+            # an eval's job re-run (--retry-crashed) replaces its record
+            by_key[rec.get("key", (f.name, i))] = rec
+    for parent, by_key in by_folder.items():
+        folder = parent.name if parent != root else None
         for rec in by_key.values():
             if rec.get("object") not in known:
                 other += 1

@@ -21,6 +21,7 @@ from cfvs_maniskill.constants import DEFAULT_SEARCH_RADIUS
 
 if TYPE_CHECKING:
     from cfvs_maniskill.robots.mounts import Mount
+    from cfvs_maniskill.sensing.profile import SensorProfile
 
 
 @dataclass
@@ -166,9 +167,9 @@ def unbuildable(
     return skip
 
 
-def sensor_files(sensors: tuple[str, ...]) -> dict[str, tuple[str, str]]:
-    """Profile name -> (name or file as given, the file it was read from); an unknown
-    profile or a bad file -> exit 2 naming it."""
+def sensor_files(sensors: tuple[str, ...]) -> dict[str, tuple[str, SensorProfile]]:
+    """Profile name -> (name or file as given, the profile read, `source` its file); an
+    unknown profile or a bad file -> exit 2 naming it."""
     from cfvs_maniskill.sensing.profile import load_profile
 
     out = {}
@@ -177,7 +178,7 @@ def sensor_files(sensors: tuple[str, ...]) -> dict[str, tuple[str, str]]:
             profile = load_profile(s)
         except ValueError as e:
             _fail(str(e))
-        out[profile.name] = (s, str(profile.source))
+        out[profile.name] = (s, profile)
     return out
 
 
@@ -197,7 +198,6 @@ def main(args: EvalArgs) -> int:
     from cfvs_maniskill.eval.settings import Settings, differences
     from cfvs_maniskill.eval.worker import WorkerConfig
     from cfvs_maniskill.provenance import sha256
-    from cfvs_maniskill.sensing.profile import load_profile
 
     configs = find_tasks(args.tasks)
     objects = resolve(args, configs)
@@ -208,10 +208,10 @@ def main(args: EvalArgs) -> int:
     now = Settings(
         seed=args.seed,
         search_radius=args.search_radius,
-        sensors={name: sha256(file) for name, (_, file) in files.items()},
+        sensors={name: sha256(p.source) for name, (_, p) in files.items()},
         tasks={name: sha256(c.source) for name, c in tasks.items()},
     )
-    mounts = {m.name: m for m in (load_profile(f).camera_mount for _, f in files.values())}
+    mounts = {m.name: m for m in (p.camera_mount for _, p in files.values())}
     skip = unbuildable(list(args.agents), tasks, now.weights, tuple(mounts.values()))
     jobs = make_jobs(
         objects,

@@ -622,6 +622,31 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
     assert_drawn_whole_and_held_out("manifolds", tmp_path, at_least=3)
 
 
+def test_casting_features_stand_where_they_say_and_the_family_is_held_out(tmp_path):
+    """`castings` (release 1.4.0's frozen set): a channel, a bevel, a raised ring and
+    lightening pockets keep off the opening's wall; a hub lifts the opening 1-5 cm on a
+    face of its own with sloped gussets beside it; training never draws the family."""
+
+    from cfvs_maniskill.data import shapes as S
+
+    keep, top = S.keep_clear("square", 0.004), 0.05
+    plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
+    hole = np.array([0.03, -0.02])
+    for seed in range(4):
+        for add in (S.add_channel, S.add_bevel, S.add_raised_ring, S.add_lightening):
+            body, level = add(np.random.default_rng(seed), plate, hole, top, keep)
+            assert level == top, (add.__name__, seed)
+            assert_wall_ring_at(body, hole, keep, top, seed, samples=40000, more_than=50)
+            grows = add in (S.add_channel, S.add_raised_ring)
+            assert (body.volume > plate.volume) == grows, (add.__name__, seed)
+        hub, raised = S.add_hub(np.random.default_rng(seed), plate, hole, top, keep)
+        assert 0.01 <= raised - top <= 0.05 and hub.bounds[1, 2] == pytest.approx(raised)
+        assert_wall_ring_at(hub, hole, keep, raised, seed, samples=40000, more_than=20)
+        n = hub.face_normals
+        assert np.any((np.abs(n[:, 2]) > 0.2) & (np.abs(n[:, 2]) < 0.995)), seed  # gussets
+    assert_drawn_whole_and_held_out("castings", tmp_path, at_least=4)
+
+
 def test_stands_raise_the_opening_or_stand_beside_it_and_are_a_training_family(tmp_path):
     """`stands` (a training family): posts keep off the opening's wall and stand 1-13 cm
     tall; most bodies put the opening on a riser above the rest of the face, so the tallest

@@ -18,6 +18,7 @@ FROZEN_RESULTS = (
     "results/generalisation_fixtures",
     "results/generalisation_housings",
     "results/generalisation_manifolds",
+    "results/generalisation_castings",
 )
 """The results folders of the frozen sets (assets/final, assets/generalisation*)."""
 

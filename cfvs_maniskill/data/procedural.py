@@ -209,6 +209,7 @@ FAMILIES = {
     "housings": "h",
     "manifolds": "m",
     "stands": "s",
+    "castings": "a",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

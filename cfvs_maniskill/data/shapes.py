@@ -33,6 +33,11 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   the time the opening itself on a riser 1-13 cm above the face: the opening need not be
   on the body's largest face, and a tall thing beside it need not hold it. A training
   family: the coarse network's bodies otherwise never raise the opening above the rest.
+- `castings`: cast plates and discs up to 30 cm, the opening anywhere on the face, with two
+  or three of: the opening on a hub braced by gussets, in a channel between two walls, a
+  chamfered edge falling away beside it, a raised ring round it, a row of lightening
+  pockets. Held out: release 1.4.0's frozen set (`assets/generalisation_castings/`) is
+  made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -705,6 +710,95 @@ def stand_body(rng, peg, clearance, folder: Path, name: str):
     return _write(mesh, hole, top, folder, name)
 
 
+def add_hub(rng, mesh, hole, top, keep):
+    """The opening on a round hub 1-5 cm above the face, 3-12 mm wider than the opening's
+    wall, braced by three to six gussets: webs 3-6 mm thick sloping from the face 1-4 cm
+    out up to the hub's side, most of the way to its top."""
+    h, r = rng.uniform(0.01, 0.05), keep + rng.uniform(0.003, 0.012)
+    hub = trimesh.creation.cylinder(r, h + 0.002, 64)
+    hub.apply_translation([*hole, top + h / 2 - 0.001])
+    parts, n, turn = [hub], int(rng.integers(3, 7)), rng.uniform(0, 2 * np.pi)
+    run, web = rng.uniform(0.01, 0.04), rng.uniform(0.003, 0.006) / 2
+    for k in range(n):
+        u = _unit(turn + 2 * np.pi * k / n)
+        v = np.array([-u[1], u[0]])
+        section = [(r - 0.002, top - 0.001), (r + run, top - 0.001), (r - 0.002, top + 0.8 * h)]
+        corners = [[*(hole + u * x + v * w), z] for x, z in section for w in (-web, web)]
+        parts.append(trimesh.convex.convex_hull(np.array(corners)))
+    return _union([mesh, *parts]), top + h
+
+
+def add_channel(rng, mesh, hole, top, keep):
+    """The opening in a channel: two parallel walls 1-4 cm tall and 3-8 mm thick, each 5-25
+    mm from the opening's wall, running 4-20 cm along it."""
+    side, length, h = rng.uniform(0, np.pi), rng.uniform(0.04, 0.2), rng.uniform(0.01, 0.04)
+    u = _unit(side)
+    walls = []
+    for s in (-1, 1):
+        thick = rng.uniform(0.003, 0.008)
+        c = hole + s * u * (keep + rng.uniform(0.005, 0.025) + thick / 2)
+        walls.append(box_at([thick, length, h + 0.002], [*c, top + h / 2 - 0.001], side))
+    return _union([mesh, *walls]), top
+
+
+def add_bevel(rng, mesh, hole, top, keep):
+    """A chamfered edge: 3-25 mm from the opening's wall the face falls away at 20-50 deg,
+    5-30 mm down (at most 80% of the part's height), the rest of that side lower."""
+    side, slope = rng.uniform(0, 2 * np.pi), np.deg2rad(rng.uniform(20, 50))
+    gap, depth = keep + rng.uniform(0.003, 0.025), min(rng.uniform(0.005, 0.03), 0.8 * top)
+    u, v = _unit(side), _unit(side + np.pi / 2)
+    section = [(gap, top + 0.001), (1.0, top + 0.001), (1.0, top - depth)]
+    section.append((gap + depth / np.tan(slope), top - depth))
+    corners = [[*(hole + u * x + v * w), z] for x, z in section for w in (-0.5, 0.5)]
+    return _minus(mesh, [trimesh.convex.convex_hull(np.array(corners))]), top
+
+
+def add_raised_ring(rng, mesh, hole, top, keep):
+    """A raised ring round the opening, as a flange's raised face or a cast lip: 2-5 mm
+    wide, 1-3 mm tall, its inner edge 2-8 mm outside the opening's wall."""
+    inner = keep + rng.uniform(0.002, 0.008)
+    width, h = rng.uniform(0.002, 0.005), rng.uniform(0.001, 0.003)
+    ring = trimesh.creation.annulus(inner, inner + width, h + 0.002, sections=96)
+    ring.apply_translation([*hole, top + h / 2 - 0.001])
+    return _union([mesh, ring]), top
+
+
+def add_lightening(rng, mesh, hole, top, keep):
+    """Lightening pockets: a row of two to five square pockets 1-3 cm wide and 5-20 mm deep
+    (at most 60% of the part's height) between webs 3-6 mm thick, starting 5-30 mm from the
+    opening's wall, where the face holds them whole."""
+    side, w = rng.uniform(0, 2 * np.pi), rng.uniform(0.01, 0.03)
+    web, d = rng.uniform(0.003, 0.006), min(rng.uniform(0.005, 0.02), 0.6 * top)
+    start = keep + rng.uniform(0.005, 0.03) + w / 2
+    cuts = []
+    for k in range(int(rng.integers(2, 6))):
+        c = hole + _unit(side) * (start + k * (w + web))
+        if not _solid_under(mesh, c, w / 2, top):
+            break  # the row ends at the face's edge
+        cuts.append(box_at([w, w, 2 * d], [*c, top], side))
+    return _minus(mesh, cuts), top
+
+
+CASTING_FEATURES = (add_hub, add_channel, add_bevel, add_raised_ring, add_lightening)
+
+
+def casting_body(rng, peg, clearance, folder: Path, name: str):
+    """A cast plate or disc (10-30 cm), 3-8 cm thick, the opening anywhere on the face,
+    with two or three of `CASTING_FEATURES` (the bevel after what stands on the face, the
+    hub last: it stands where the opening is)."""
+    return _featured_part(
+        rng,
+        peg,
+        clearance,
+        folder,
+        name,
+        thick=(0.03, 0.08),
+        across=(0.10, 0.30),
+        features=CASTING_FEATURES,
+        last=(add_bevel, add_hub),
+    )
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
@@ -716,6 +810,9 @@ FAMILIES: dict[str, Draw] = {
     "housings": housing_body,
     "manifolds": manifold_body,
     "stands": stand_body,
+    "castings": casting_body,
 }
-HELD_OUT_FAMILIES = ("composite", "grooved", "plates", "fixtures", "housings", "manifolds")
+HELD_OUT_FAMILIES = (
+    *("composite", "grooved", "plates", "fixtures", "housings", "manifolds", "castings"),
+)
 """Never drawn for training: the frozen generalisation sets' families."""

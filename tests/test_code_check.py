@@ -43,11 +43,34 @@ def test_the_fingerprint_is_the_running_code_and_moves_only_with_what_runs():
     assert fingerprint(sources(report)) == code_fingerprint()
 
 
+def check_as_if_today(monkeypatch, change: dict[str, tuple[str, str]]) -> int:
+    """`report --check` on the README's records with today's checkout carrying `change`
+    (sources() above), as a branch that made it without re-running would check them."""
+    from cfvs_maniskill.report import trace
+    from cfvs_maniskill.report.__main__ import check
+    from cfvs_maniskill.report.load import load_records
+
+    branch = dict(sources(change))
+    whole = fingerprint(branch.items())
+    monkeypatch.setattr(trace, "code_fingerprint", lambda: whole)
+    monkeypatch.setattr(trace, "_sources_today", lambda: branch)
+    trace._module_fingerprint_at.cache_clear()
+    try:
+        return check(load_records(ROOT / "results"), [], None)
+    finally:
+        trace._module_fingerprint_at.cache_clear()
+
+
+def stale_agents(out: str) -> set[str]:
+    return {ln.split()[0] for ln in out.splitlines() if ": stale: episode code changed" in ln}
+
+
 def test_check_names_the_cells_a_branch_changing_an_agent_leaves_stale(monkeypatch, capsys):
     """The README's records, checked as a branch that changed CFVS's wrist turn without
-    re-running would check them: exit 1, every CFVS cell named stale; the same branch with
-    only a docstring changed passes."""
-    from cfvs_maniskill.report import trace
+    re-running would check them: exit 1, every CFVS cell named stale, and the agents that
+    import CFVS (icp, icp_kpts start from its coarse stage); KOVIS, 3DRHD and the oracle
+    run none of that code and stay current. A change to the env stales every agent; a
+    docstring none."""
     from cfvs_maniskill.report.__main__ import check
     from cfvs_maniskill.report.load import load_records
 
@@ -55,20 +78,38 @@ def test_check_names_the_cells_a_branch_changing_an_agent_leaves_stale(monkeypat
     assert check(records, [], ROOT / "README.md") == 0, capsys.readouterr().out[-2000:]
     capsys.readouterr()
 
-    branch = fingerprint(sources({"policies/cfvs/agent.py": ("MAX_TURNS = 3", "MAX_TURNS = 2")}))
-    monkeypatch.setattr(trace, "code_fingerprint", lambda: branch)
-    assert check(records, [], None) == 1
+    turn = {"policies/cfvs/agent.py": ("MAX_TURNS = 3", "MAX_TURNS = 2")}
+    assert check_as_if_today(monkeypatch, turn) == 1
     out = capsys.readouterr().out
     assert "cfvs PegInsert6DoF realistic large: stale: episode code changed since" in out, out
     assert "NOT today's episode code" in out
+    assert stale_agents(out) == {"cfvs", "cfvs_plain", "icp", "icp_kpts"}, stale_agents(out)
 
-    docs_only = fingerprint(
-        sources(
-            {"policies/cfvs/config.py": ('"""The config of ablation `name`', '"""Ablation `name`')}
-        )
-    )
-    monkeypatch.setattr(trace, "code_fingerprint", lambda: docs_only)
-    assert check(records, [], None) == 0
+    env = {"envs/peg_insert.py": ("MAX_INIT_TRIES = 100", "MAX_INIT_TRIES = 99")}
+    assert check_as_if_today(monkeypatch, env) == 1
+    stale = stale_agents(capsys.readouterr().out)
+    assert {"cfvs", "kovis", "3drhd", "oracle", "icp"} <= stale, stale
+
+    docs_only = {"policies/cfvs/config.py": ('"""The config of ablation `name`', '"""Ablation')}
+    assert check_as_if_today(monkeypatch, docs_only) == 0
+
+
+def test_every_module_of_episode_code_is_in_some_agents_scope():
+    """An agent's scope follows the package's import statements (report/scope.py); a module
+    no agent's episodes import (reached some other way, by a name in a string) would leave
+    every record current when it changes. Only tools run by no episode are outside."""
+    from cfvs_maniskill.policies.registry import AGENTS
+    from cfvs_maniskill.provenance import is_episode_code
+    from cfvs_maniskill.report.scope import agent_scope
+
+    src = dict(sources())
+    scopes = {a: agent_scope(src, e.cls.split(":")[0]) for a, e in AGENTS.items()}
+    reached = set().union(*scopes.values())
+    tools = {"assets.py", "tool.py", "stats.py", "objects/meshes.py"}  # CLIs, asset scripts
+    assert {p for p in src if is_episode_code(p)} - reached == tools
+    assert "perception/rim.py" in scopes["cfvs"] and "perception/rim.py" not in scopes["kovis"]
+    assert "sensing/depth.py" in scopes["kovis"] and "control/executor.py" in scopes["oracle"]
+    assert agent_scope(src, "my_pkg.my_agent") is None  # your own agent: all the code
 
 
 def test_the_version_is_written_once_so_a_release_leaves_records_current():

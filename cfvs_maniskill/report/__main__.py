@@ -49,8 +49,8 @@ def check(records: list[dict], crashed: list[dict], readme: Path | None) -> int:
     for table, sensors in tables.HEADLINES.items():
         recs = [r for (_, _, sensor, _), rs in cells.items() if sensor in sensors for r in rs]
         if recs:
-            prints = {trace.resolve(r).get("code_fingerprint") for r in recs}
-            state = "today's episode code" if prints == {today} else "NOT today's episode code"
+            current = all(trace.code_current(r, trace.resolve(r)) for r in recs)
+            state = "today's episode code" if current else "NOT today's episode code"
             print(
                 f"table {table} ({', '.join(sensors)}): {len(recs)} records, code "
                 f"{trace.code_versions(recs)}: {state} ({today})"

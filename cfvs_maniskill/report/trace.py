@@ -1,9 +1,10 @@
 """Which code and files each table cell comes from, and whether it is still what today's
 code and files would give: a cell is *mixed* when its records differ in code, weights,
-sensor profile or task file, and *stale* when they were made with episode code
-(provenance.code_fingerprint), weights, a sensor profile, a task or hole file that is not
-today's (or with no provenance at all). A record without a fingerprint has its commit's,
-computed from git.
+sensor profile or task file, and *stale* when they were made with episode code,
+weights, a sensor profile, a task or hole file that is not today's (or with no provenance
+at all). The episode code is that which the record's agent can run (report/scope.py),
+compared with git's copy at the record's commit; a record of uncommitted code is compared
+on all of it (provenance.code_fingerprint).
 
 Records made before records carried provenance have a reconstructed one, `{"code":
 COMMIT, "reconstructed": "git"}`: COMMIT added the record to the repository (the code that
@@ -23,6 +24,7 @@ from pathlib import Path
 from cfvs_maniskill import resources
 from cfvs_maniskill.constants import PROJECT_ROOT
 from cfvs_maniskill.provenance import PACKAGE_DIR, code_fingerprint, fingerprint, sha256
+from cfvs_maniskill.report.scope import scoped_fingerprint
 
 
 def _git(*args: str, text: bool = True):
@@ -63,9 +65,10 @@ def _hole_files() -> dict[str, tuple[str, ...]]:
 
 
 @functools.cache
-def fingerprint_at(code: str) -> str | None:
-    """The episode code's fingerprint at commit `code` (a record's `code`: `git describe`
-    output or a hash), None where git cannot give it (not a commit here, or `+dirty`)."""
+def _sources_at(code: str) -> dict[str, bytes] | None:
+    """The package's modules (path in the package -> source) at commit `code` (a record's
+    `code`: `git describe` output or a hash), None where git cannot give them (not a commit
+    here, or `+dirty`)."""
     if "+" in code:
         return None
     commit = code.rsplit("-g", 1)[-1]  # `git describe`: TAG-N-gHASH
@@ -73,12 +76,49 @@ def fingerprint_at(code: str) -> str | None:
         listing = _git("ls-tree", "-r", commit, "--", PACKAGE_DIR.name)
     except (OSError, subprocess.CalledProcessError):
         return None
-    blobs = {}
+    sources = {}
     for ln in listing.splitlines():
         meta, path = ln.split("\t", 1)
         if meta.split()[1] == "blob" and path.endswith(".py"):
-            blobs[path.split("/", 1)[1]] = meta.split()[2]
-    return fingerprint((path, _blob(blob)) for path, blob in blobs.items())
+            sources[path.split("/", 1)[1]] = _blob(meta.split()[2])
+    return sources
+
+
+@functools.cache
+def fingerprint_at(code: str) -> str | None:
+    """The episode code's fingerprint at commit `code`, None where git cannot give it."""
+    sources = _sources_at(code)
+    return None if sources is None else fingerprint(sources.items())
+
+
+@functools.cache
+def _sources_today() -> dict[str, bytes]:
+    return {
+        f.relative_to(PACKAGE_DIR).as_posix(): f.read_bytes() for f in PACKAGE_DIR.rglob("*.py")
+    }
+
+
+@functools.cache
+def agent_module(agent: str) -> str | None:
+    """The module (dotted) defining agent `agent`'s class, None when it cannot be named."""
+    from cfvs_maniskill.policies.registry import _entry
+
+    try:
+        return _entry(agent).cls.split(":", 1)[0]
+    except KeyError:
+        return None
+
+
+def agent_fingerprint_at(code: str | None, agent: str) -> str | None:
+    """The fingerprint of the episode code `agent`'s episodes can run (report/scope.py) at
+    commit `code` (None: today's checkout); None where git cannot give the code."""
+    return _module_fingerprint_at(code, agent_module(agent))
+
+
+@functools.cache
+def _module_fingerprint_at(code: str | None, module: str | None) -> str | None:
+    sources = _sources_today() if code is None else _sources_at(code)
+    return None if sources is None else scoped_fingerprint(sources, module)
 
 
 @functools.cache
@@ -92,6 +132,8 @@ def resolve(rec: dict) -> dict:
     p = rec.get("provenance") or {}
     if p and "code_fingerprint" not in p:
         p = {**p, "code_fingerprint": fingerprint_at(str(p.get("code")))}
+    if p and "agent" in rec:
+        p = {**p, "agent_fingerprint": agent_fingerprint_at(str(p.get("code")), rec["agent"])}
     if p.get("reconstructed") != "git":
         return p
     commit = p["code"]
@@ -116,7 +158,7 @@ def signature(p: dict) -> tuple:
     """What must agree between the records of one cell, from a resolved provenance (the
     object's files may differ: a cell averages over objects)."""
     return (
-        p.get("code_fingerprint") or p.get("code"),
+        p.get("agent_fingerprint") or p.get("code_fingerprint") or p.get("code"),
         json.dumps(p.get("agent_code"), sort_keys=True),
         json.dumps(p.get("weights"), sort_keys=True),
         (p.get("sensor") or {}).get("sha256"),
@@ -156,16 +198,26 @@ def agent_weights_today(agent: str, task: str, mount: str | None = None) -> dict
     return loaded
 
 
+def code_current(rec: dict, p: dict) -> bool:
+    """Whether the episode code the record's agent can run (`agent_fingerprint`, from the
+    record's commit) is today's; a record of uncommitted code compares all of it."""
+    if p.get("agent_fingerprint") is not None:
+        return p["agent_fingerprint"] == agent_fingerprint_at(None, rec["agent"])
+    return p.get("code_fingerprint") is not None and p["code_fingerprint"] == code_fingerprint()
+
+
+def code_change(p: dict) -> str:
+    if p.get("code_fingerprint") is None:
+        return f"code {p.get('code')} unknown (not a commit of this checkout)"
+    return f"episode code changed since {p.get('code')}"
+
+
 def stale_reasons(rec: dict, p: dict) -> list[str]:
     """Why a record, of resolved provenance `p`, is not what today's code and files would
     give (empty: current)."""
     if not p:
         return ["no provenance"]
-    out = []
-    if p.get("code_fingerprint") is None:
-        out.append(f"code {p.get('code')} unknown (not a commit of this checkout)")
-    elif p["code_fingerprint"] != code_fingerprint():
-        out.append(f"episode code changed since {p.get('code')}")
+    out = [] if code_current(rec, p) else [code_change(p)]
     for kind in ("sensor", "task"):
         entry = p.get(kind) or {}
         if entry.get("file") and _today(entry["file"]) != entry.get("sha256"):

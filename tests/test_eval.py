@@ -782,3 +782,39 @@ def test_a_run_over_cameras_on_two_mounts_resumes_and_other_weights_are_named():
     done = dict([record("d435", "tip_view_long", usual)])
     (why,) = differences(done, now)
     assert "agent cfvs on PegInsert3DoF: its weights" in why and "tip_view_long" in why
+
+
+def test_rerun_stale_runs_only_the_stale_records_again_and_never_a_frozen_sets(tmp_path):
+    """--rerun-stale on two of the README's oracle records, one of them made stale (another
+    episode code, uncommitted): that one leaves the folder and runs again, the other stays
+    as it was. On a frozen set's results it is refused before anything is written."""
+    import gzip
+
+    src = ROOT / "results/headline/main/episodes.jsonl.gz"
+    keys = [f"PegInsert3DoF|oracle|cuboid_test_1|small|{e}" for e in (0, 1)]  # ideal: no suffix
+    lines = gzip.decompress(src.read_bytes()).decode().splitlines()
+    mine = [r for r in map(json.loads, lines) if r["key"] in keys]
+    assert len(mine) == 2, [r["key"] for r in mine]
+    current, old = sorted(mine, key=lambda r: r["key"])
+    old = {**old, "provenance": {**old["provenance"], "code": "v0+dirty", "code_fingerprint": "0"}}
+    gz = tmp_path / "episodes.jsonl.gz"
+    gz.write_bytes(gzip.compress("".join(json.dumps(r) + "\n" for r in (current, old)).encode()))
+    args = ["--tasks", "PegInsert3DoF", "--agents", "oracle", "--objects", "cuboid_test_1",
+            "--init-errors", "small", "--episodes-per-object", "2", "--seed", "0",
+            "--workers", "1", "--rerun-stale"]  # fmt: skip
+    r = run_cli("cfvs_maniskill.eval", *args, "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "1 stale records removed" in r.stdout and "1 to run" in r.stdout, r.stdout
+    assert "stale: episode code changed since v0+dirty (1 records)" in r.stdout
+    lines = gzip.decompress(gz.read_bytes()).decode().splitlines()
+    assert len(lines) == 2 and not (tmp_path / "episodes.jsonl").exists()  # folded, no twins
+    recs = {x["key"]: x for x in map(json.loads, lines)}
+    assert set(recs) == {current["key"], old["key"]} and recs[current["key"]] == current
+    assert recs[old["key"]]["provenance"]["code"] != "v0+dirty"
+    assert recs[old["key"]]["seed"] == old["seed"]
+
+    held = ROOT / "results/generalisation_housings/1.2.0/search-0"
+    before = sorted(p.name for p in held.iterdir())
+    r = run_cli("cfvs_maniskill.eval", *args, "--out", str(held))
+    assert r.returncode == 2 and "frozen set's records" in r.stderr, r.stderr[-2000:]
+    assert sorted(p.name for p in held.iterdir()) == before

@@ -9,18 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from cfvs_maniskill.eval.results import FROZEN_RESULTS
+
 ROOT = Path(__file__).resolve().parent.parent
-FROZEN_RESULTS = (
-    "results/final",
-    "results/generalisation",
-    "results/generalisation_grooved",
-    "results/generalisation_plates",
-    "results/generalisation_fixtures",
-    "results/generalisation_housings",
-    "results/generalisation_manifolds",
-    "results/generalisation_castings",
-)
-"""The results folders of the frozen sets (assets/final, assets/generalisation*)."""
 
 
 def git(*args: str, text: bool = True):

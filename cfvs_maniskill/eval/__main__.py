@@ -47,6 +47,10 @@ class EvalArgs:
     process (no protection from a crash; for debugging)."""
     retry_crashed: bool = False
     """Run the jobs recorded as crashed again (their new records replace the old)."""
+    rerun_stale: bool = False
+    """Run again the jobs whose records are stale by `report --check`'s rule (episode code
+    their agent runs, weights, sensor, task or hole files that are not today's): those
+    records leave the folder first (git keeps them). Refused on a frozen set's results."""
     backend: Literal["local", "ray"] = "local"
     """local: worker processes on this machine; ray: one Ray actor per worker."""
     address: str | None = None
@@ -194,7 +198,7 @@ def grid_size(args: EvalArgs, objects: dict[str, list[str]], sensors: int) -> in
 
 def main(args: EvalArgs) -> int:
     from cfvs_maniskill.eval.jobs import make_jobs
-    from cfvs_maniskill.eval.results import ResultsError, exclusive, read_done
+    from cfvs_maniskill.eval.results import ResultsError, exclusive, frozen, read_done
     from cfvs_maniskill.eval.settings import Settings, differences
     from cfvs_maniskill.eval.worker import WorkerConfig
     from cfvs_maniskill.provenance import sha256
@@ -222,6 +226,8 @@ def main(args: EvalArgs) -> int:
         list(files),
     )
     jobs = [j for j in jobs if (j.task, j.agent) not in skip]
+    if args.rerun_stale and (held := frozen(args.out)):
+        _fail(f"--rerun-stale: {args.out} holds a frozen set's records ({held}), run once")
     try:
         args.out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -237,6 +243,8 @@ def main(args: EvalArgs) -> int:
     try:
         with exclusive(path):
             done = read_done(path)
+            if args.rerun_stale:
+                done = drop_stale(path, done)
             if diff := differences(done, now):
                 _fail(
                     f"{path} holds records made with other settings; resume with the settings "
@@ -245,6 +253,27 @@ def main(args: EvalArgs) -> int:
             return _evaluate(args, jobs, path, done, cfg, now)
     except ResultsError as e:
         _fail(str(e))
+
+
+def drop_stale(path: Path, done: dict[str, dict]) -> dict[str, dict]:
+    """`done` without its stale records (report/trace.py), which leave the results files;
+    one line per reason says how many went."""
+    from collections import Counter
+
+    from cfvs_maniskill.eval.results import drop
+    from cfvs_maniskill.report import trace
+
+    reasons: Counter = Counter()
+    stale = set()
+    for key, rec in done.items():
+        if not rec.get("crashed") and (why := trace.stale_reasons(rec, trace.resolve(rec))):
+            stale.add(key)
+            reasons.update(why)
+    drop(path, stale)
+    for why, n in reasons.most_common():
+        print(f"stale: {why} ({n} records)")
+    print(f"{len(stale)} stale records removed from {path.parent}; their jobs run again")
+    return {k: r for k, r in done.items() if k not in stale}
 
 
 def _evaluate(args: EvalArgs, jobs, path: Path, done: dict, cfg, now) -> int:

@@ -97,6 +97,46 @@ def fold_into_compressed(path: Path) -> None:
     path.unlink()
 
 
+FROZEN_RESULTS = (
+    "results/final",
+    "results/generalisation",
+    "results/generalisation_grooved",
+    "results/generalisation_plates",
+    "results/generalisation_fixtures",
+    "results/generalisation_housings",
+    "results/generalisation_manifolds",
+    "results/generalisation_castings",
+)
+"""The results folders of the frozen sets (assets/final, assets/generalisation*), relative
+to the checkout: each record there is what its release's one run wrote, never re-run."""
+
+
+def frozen(folder: Path) -> str | None:
+    """The frozen results folder `folder` lies in (FROZEN_RESULTS), or None."""
+    from cfvs_maniskill.constants import PROJECT_ROOT
+
+    at = folder.resolve()
+    return next((f for f in FROZEN_RESULTS if at.is_relative_to(PROJECT_ROOT / f)), None)
+
+
+def drop(path: Path, keys: set[str]) -> None:
+    """Remove the records of `keys` from `path` and its compressed copy, each rewritten aside
+    and renamed over it: a kill leaves every file whole, with or without them."""
+    for f in (compressed(path), path):
+        if not f.exists():
+            continue
+        lines = read_text(f).splitlines()
+        kept = "".join(
+            f"{ln}\n" for ln in lines if ln.strip() and json.loads(ln)["key"] not in keys
+        )
+        tmp = f.with_name(f.name + ".tmp")
+        data = kept.encode()
+        tmp.write_bytes(
+            gzip.compress(data, compresslevel=9, mtime=0) if f.suffix == ".gz" else data
+        )
+        os.replace(tmp, f)
+
+
 def append(path: Path, record: dict) -> None:
     """Append one record, or leave the file exactly as it was: a failed write (disk full,
     file-size limit) is cut back off, so the file never holds half a line."""

@@ -528,6 +528,15 @@ def test_fixture_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
         procedural_specs(2, 1, "square", 0.004, 0.045, "fixtures")
 
 
+def plate_with_opening():
+    """(keep, top, plate, hole) for adding features to: a 30 cm plate 5 cm thick, the square
+    peg's opening (4 mm clearance) off its centre."""
+    from cfvs_maniskill.data import shapes as S
+
+    keep, top = S.keep_clear("square", 0.004), 0.05
+    return keep, top, S.box_at([0.3, 0.3, top], [0, 0, top / 2]), np.array([0.03, -0.02])
+
+
 def assert_wall_ring_at(body, hole, keep, level, seed, samples: int, more_than: int) -> None:
     """The opening's wall stays whole: of `samples` surface points of `body`, those within
     `keep` of the axis at `hole` (x, y) and above the table, more than `more_than`, all lie
@@ -566,9 +575,7 @@ def test_housing_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
 
     from cfvs_maniskill.data import shapes as S
 
-    keep, top = S.keep_clear("square", 0.004), 0.05
-    plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
-    hole = np.array([0.03, -0.02])
+    keep, top, plate, hole = plate_with_opening()
     for seed in range(4):
         sunk, level = S.add_countersink(np.random.default_rng(seed), plate, hole, top, keep)
         assert top - 0.0075 < level < top - 0.0009, seed  # 1-4 mm flare at 30-45 deg
@@ -595,9 +602,7 @@ def test_manifold_features_stand_where_they_say_and_the_family_is_held_out(tmp_p
 
     from cfvs_maniskill.data import shapes as S
 
-    keep, top = S.keep_clear("square", 0.004), 0.05
-    plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
-    hole = np.array([0.03, -0.02])
+    keep, top, plate, hole = plate_with_opening()
 
     for seed in range(4):
         for add in (S.add_seal_groove, S.add_ports, S.add_fittings, S.add_offset_recess):
@@ -629,9 +634,7 @@ def test_casting_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
 
     from cfvs_maniskill.data import shapes as S
 
-    keep, top = S.keep_clear("square", 0.004), 0.05
-    plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
-    hole = np.array([0.03, -0.02])
+    keep, top, plate, hole = plate_with_opening()
     for seed in range(4):
         for add in (S.add_channel, S.add_bevel, S.add_raised_ring, S.add_lightening):
             body, level = add(np.random.default_rng(seed), plate, hole, top, keep)
@@ -657,9 +660,7 @@ def test_stands_raise_the_opening_or_stand_beside_it_and_are_a_training_family(t
     from cfvs_maniskill.data import shapes as S
     from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
 
-    keep, top = S.keep_clear("square", 0.004), 0.05
-    plate = S.box_at([0.3, 0.3, top], [0, 0, top / 2])
-    hole = np.array([0.03, -0.02])
+    keep, top, plate, hole = plate_with_opening()
     for seed in range(8):
         posts, level = S.add_posts(np.random.default_rng(seed), plate, hole, top, keep)
         assert level == top and top + 0.009 < posts.bounds[1, 2] <= top + 0.13, seed

@@ -46,6 +46,7 @@ radius plus `MIN_WALL`) away from the hole's axis.
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -437,26 +438,6 @@ def _plate_or_disc(rng, keep: float, top: float, across: tuple[float, float]):
     return mesh, _unit(rng.uniform(0, 2 * np.pi)) * (r - keep) * np.sqrt(rng.uniform(0, 0.9))
 
 
-FIXTURE_FEATURES = (add_bolt_circle, add_pins, add_ramp, add_wall, add_drop, add_island)
-
-
-def fixture_body(rng, peg, clearance, folder: Path, name: str):
-    """A fixture plate (12-28 cm) or a flange (a disc 12-28 cm across), 3-7 cm thick, the
-    opening anywhere on the face, with two or three of `FIXTURE_FEATURES` (an island last:
-    what stands beside the opening stands on the face, not at the island's height)."""
-    return _featured_part(
-        rng,
-        peg,
-        clearance,
-        folder,
-        name,
-        thick=(0.03, 0.07),
-        across=(0.12, 0.28),
-        features=FIXTURE_FEATURES,
-        last=(add_island,),
-    )
-
-
 def _featured_part(
     rng, peg, clearance, folder, name, thick, across, features, last=(), base=_plate_or_disc
 ):
@@ -472,6 +453,23 @@ def _featured_part(
     if len(mesh.split(only_watertight=False)) > 1:
         return None
     return _write(mesh, hole, top, folder, name)
+
+
+def _part(thick, across, features, last=(), base=_plate_or_disc) -> Draw:
+    """A family of `_featured_part` bodies: `thick` and `across` (m, ranges), two or three
+    of `features`, those in `last` after the rest."""
+    return partial(
+        _featured_part, thick=thick, across=across, features=features, last=last, base=base
+    )
+
+
+FIXTURE_FEATURES = (add_bolt_circle, add_pins, add_ramp, add_wall, add_drop, add_island)
+
+
+fixture_body = _part((0.03, 0.07), (0.12, 0.28), FIXTURE_FEATURES, last=(add_island,))
+"""A fixture plate (12-28 cm) or a flange (a disc 12-28 cm across), 3-7 cm thick, the
+opening anywhere on the face, with two or three of `FIXTURE_FEATURES` (an island last:
+what stands beside the opening stands on the face, not at the island's height)."""
 
 
 def add_countersink(rng, mesh, hole, top, keep):
@@ -548,21 +546,12 @@ def add_bracket(rng, mesh, hole, top, keep):
 HOUSING_FEATURES = (add_tower, add_slot, add_bracket, add_ribs, add_wall, add_countersink)
 
 
-def housing_body(rng, peg, clearance, folder: Path, name: str):
-    """A housing block (10-30 cm) or a disc 10-30 cm across, 3-8 cm thick, the opening
-    anywhere on the face, with two or three of `HOUSING_FEATURES` (a tower after what stands
-    on the face, a countersink last: it is cut where the opening ends up)."""
-    return _featured_part(
-        rng,
-        peg,
-        clearance,
-        folder,
-        name,
-        thick=(0.03, 0.08),
-        across=(0.10, 0.30),
-        features=HOUSING_FEATURES,
-        last=(add_tower, add_countersink),
-    )
+housing_body = _part(
+    (0.03, 0.08), (0.10, 0.30), HOUSING_FEATURES, last=(add_tower, add_countersink)
+)
+"""A housing block (10-30 cm) or a disc 10-30 cm across, 3-8 cm thick, the opening
+anywhere on the face, with two or three of `HOUSING_FEATURES` (a tower after what stands
+on the face, a countersink last: it is cut where the opening ends up)."""
 
 
 def _block_or_bar(rng, keep: float, top: float, across: tuple[float, float]):
@@ -649,22 +638,16 @@ def add_offset_recess(rng, mesh, hole, top, keep):
 MANIFOLD_FEATURES = (add_ports, add_fittings, add_wall, add_offset_recess, add_seal_groove)
 
 
-def manifold_body(rng, peg, clearance, folder: Path, name: str):
-    """A manifold block or disc (10-30 cm) or a round bar with a milled flat, 4-10 cm thick,
-    the opening anywhere on the face, with two or three of `MANIFOLD_FEATURES` (a recess
-    after what stands on the face, the seal groove last: both cut where the opening is)."""
-    return _featured_part(
-        rng,
-        peg,
-        clearance,
-        folder,
-        name,
-        thick=(0.04, 0.10),
-        across=(0.10, 0.30),
-        features=MANIFOLD_FEATURES,
-        last=(add_offset_recess, add_seal_groove),
-        base=_block_or_bar,
-    )
+manifold_body = _part(
+    (0.04, 0.10),
+    (0.10, 0.30),
+    MANIFOLD_FEATURES,
+    last=(add_offset_recess, add_seal_groove),
+    base=_block_or_bar,
+)
+"""A manifold block or disc (10-30 cm) or a round bar with a milled flat, 4-10 cm thick,
+the opening anywhere on the face, with two or three of `MANIFOLD_FEATURES` (a recess
+after what stands on the face, the seal groove last: both cut where the opening is)."""
 
 
 def add_posts(rng, mesh, hole, top, keep):
@@ -782,21 +765,10 @@ def add_lightening(rng, mesh, hole, top, keep):
 CASTING_FEATURES = (add_hub, add_channel, add_bevel, add_raised_ring, add_lightening)
 
 
-def casting_body(rng, peg, clearance, folder: Path, name: str):
-    """A cast plate or disc (10-30 cm), 3-8 cm thick, the opening anywhere on the face,
-    with two or three of `CASTING_FEATURES` (the bevel after what stands on the face, the
-    hub last: it stands where the opening is)."""
-    return _featured_part(
-        rng,
-        peg,
-        clearance,
-        folder,
-        name,
-        thick=(0.03, 0.08),
-        across=(0.10, 0.30),
-        features=CASTING_FEATURES,
-        last=(add_bevel, add_hub),
-    )
+casting_body = _part((0.03, 0.08), (0.10, 0.30), CASTING_FEATURES, last=(add_bevel, add_hub))
+"""A cast plate or disc (10-30 cm), 3-8 cm thick, the opening anywhere on the face,
+with two or three of `CASTING_FEATURES` (the bevel after what stands on the face, the
+hub last: it stands where the opening is)."""
 
 
 FAMILIES: dict[str, Draw] = {

@@ -771,6 +771,7 @@ def test_a_run_over_cameras_on_two_mounts_resumes_and_other_weights_are_named():
     assert unbuildable(["cfvs"], {task: TASKS[task]}, now.weights, mounts) == set()
     long, usual = (agent_weights_today("cfvs", task, m.name) for m in mounts[::-1])
     assert long != usual and now.weights[(task, "cfvs", "tip_view_long")] == long
+    assert now.weights[(task, "cfvs", "tip_view")] == usual  # from the build that decided
 
     def record(sensor: str, mount: str, weights: dict) -> tuple[str, dict]:
         key = f"{task}|cfvs|cylinder|large|0|{sensor}"

@@ -142,6 +142,7 @@ def unbuildable(
     from cfvs_maniskill.policies.interface import TaskSpec
     from cfvs_maniskill.policies.registry import PRIVILEGED, resolve_agent
     from cfvs_maniskill.provenance import track_weights
+    from cfvs_maniskill.robots.mounts import DEFAULT_MOUNT, MOUNTS
 
     skip: set[tuple[str, str]] = set()
     for a in agents:
@@ -150,7 +151,8 @@ def unbuildable(
         reasons = []
         for t, cfg in tasks.items():
             try:
-                resolve_agent(a)(TaskSpec.of(cfg))
+                with track_weights() as on_default:
+                    resolve_agent(a)(TaskSpec.of(cfg))
             except WeightsError as e:
                 print(f"skipping {t} x {a}: {e}")
                 skip.add((t, a))
@@ -158,14 +160,18 @@ def unbuildable(
                 continue
             except Exception:  # a bug in the agent: each of its episodes records it
                 continue
-            if weights is not None:
-                for mount in mounts:
-                    try:
-                        with track_weights() as on_mount:
-                            resolve_agent(a)(TaskSpec.of(cfg, mount))
-                    except Exception:  # its episodes on that mount record why
-                        continue
-                    weights[(t, a, mount.name)] = dict(sorted(on_mount.items()))
+            if weights is None:
+                continue
+            for mount in mounts:
+                if mount == MOUNTS[DEFAULT_MOUNT]:  # built just now
+                    weights[(t, a, mount.name)] = dict(sorted(on_default.items()))
+                    continue
+                try:
+                    with track_weights() as on_mount:
+                        resolve_agent(a)(TaskSpec.of(cfg, mount))
+                except Exception:  # its episodes on that mount record why
+                    continue
+                weights[(t, a, mount.name)] = dict(sorted(on_mount.items()))
         if tasks and len(reasons) == len(tasks):
             _fail(f"agent '{a}' can run none of the tasks {list(tasks)}: {reasons[0]}")
     return skip

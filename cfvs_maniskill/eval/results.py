@@ -90,11 +90,17 @@ def fold_into_compressed(path: Path) -> None:
     if not (gz.exists() and path.exists()):
         return
     old = read_text(gz)
-    text = old + ("\n" if old and not old.endswith("\n") else "") + path.read_text()
-    tmp = gz.with_name(gz.name + ".tmp")
-    tmp.write_bytes(gzip.compress(text.encode(), compresslevel=9, mtime=0))
-    os.replace(tmp, gz)  # a kill before the unlink leaves records in both: read once by key
-    path.unlink()
+    _replace(gz, old + ("\n" if old and not old.endswith("\n") else "") + path.read_text())
+    path.unlink()  # a kill before this leaves records in both: read once by key
+
+
+def _replace(f: Path, text: str) -> None:
+    """Write `text` as results file `f` (compressed for `.gz`) aside, then rename it over
+    `f`: a kill leaves either file whole."""
+    data = text.encode()
+    tmp = f.with_name(f.name + ".tmp")
+    tmp.write_bytes(gzip.compress(data, compresslevel=9, mtime=0) if f.suffix == ".gz" else data)
+    os.replace(tmp, f)
 
 
 FROZEN_RESULTS = (
@@ -120,21 +126,15 @@ def frozen(folder: Path) -> str | None:
 
 
 def drop(path: Path, keys: set[str]) -> None:
-    """Remove the records of `keys` from `path` and its compressed copy, each rewritten aside
-    and renamed over it: a kill leaves every file whole, with or without them."""
+    """Remove the records of `keys` from `path` and its compressed copy (`_replace`)."""
     for f in (compressed(path), path):
         if not f.exists():
             continue
         lines = read_text(f).splitlines()
-        kept = "".join(
-            f"{ln}\n" for ln in lines if ln.strip() and json.loads(ln)["key"] not in keys
+        _replace(
+            f,
+            "".join(f"{ln}\n" for ln in lines if ln.strip() and json.loads(ln)["key"] not in keys),
         )
-        tmp = f.with_name(f.name + ".tmp")
-        data = kept.encode()
-        tmp.write_bytes(
-            gzip.compress(data, compresslevel=9, mtime=0) if f.suffix == ".gz" else data
-        )
-        os.replace(tmp, f)
 
 
 def append(path: Path, record: dict) -> None:

@@ -82,8 +82,11 @@ def agent_scope(sources: dict[str, bytes], agent_module: str | None) -> set[str]
     `agent_module` (dotted) can run; None for a module outside the package."""
     if agent_module is None or not agent_module.startswith(f"{PACKAGE}."):
         return None
-    folders = [p for p in sources if p.startswith(POLICIES) and p.count("/") == 2]
-    registry_reads = {p for p in folders if p.endswith("/__init__.py")}
+    registry_reads = {  # policies/<folder>/__init__.py
+        p
+        for p in sources
+        if p.startswith(POLICIES) and p.endswith("/__init__.py") and p.count("/") == 2
+    }
     seen: set[str] = set()
     todo = [*ROOTS, *_module_paths(agent_module, sources)]
     for init in registry_reads:

@@ -549,3 +549,28 @@ def test_a_fine_look_at_a_walls_back_is_not_used(make_env):
     assert "looking again" in first_fine_step(wall)
     face = H[:3, 3] + np.outer(u, x) + np.outer(v - 0.04, y)
     assert first_fine_step(face).startswith("fine iteration 1")
+
+
+def test_a_look_that_finds_no_opening_does_not_undo_one_that_did():
+    """The fine stage's looks of one hole are fused: a look whose opening was fitted
+    outweighs OPN's position alone (4 mm off) and keeps its orientation, a look asking for
+    a long move counts for little, and the fit reads the points of the last LOOKS looks."""
+    from scipy.spatial.transform import Rotation
+
+    from cfvs_maniskill.geometry import make
+    from cfvs_maniskill.policies.cfvs.sightings import LOOKS, Sightings
+
+    s = Sightings()
+    fitted = make(np.eye(3), [0.100, 0.0, 0.05])
+    s.add(fitted, True, 0.001)
+    out = s.add(
+        make(Rotation.from_euler("z", 5, degrees=True).as_matrix(), [0.104, 0.0, 0.05]),
+        False,
+        0.001,
+    )
+    assert abs(out[0, 3] - 0.100) < 0.0005 and np.allclose(out[:3, :3], np.eye(3))
+    out = s.add(make(np.eye(3), [0.130, 0.0, 0.05]), True, 0.03)
+    assert abs(out[0, 3] - 0.100) < 0.001 and len(s) == 3
+    for i in range(LOOKS + 2):
+        cloud = s.cloud(np.full((5, 3), float(i)))
+    assert len(cloud) == 5 * LOOKS and cloud.min() == 2.0

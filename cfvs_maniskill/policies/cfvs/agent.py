@@ -12,7 +12,7 @@
    the opening OPN points at (perception/rim.py): OPN gives where the hole is, the face
    gives its axis (3- and 4-DoF holes are upright); the opening seen on that face then
    gives its centre, and a square's yaw (`opening_fit`, perception/opening.py), OPN's
-   estimate the place to look.
+   estimate the place to look; the looks are fused into one estimate (sightings.py).
 3. Insert along the tool axis (shared executor, force-bounded).
 
 Every component is a CFVSConfig switch; config.ABLATIONS names the agent that changes one
@@ -51,6 +51,7 @@ from cfvs_maniskill.perception.view import approach_yaws, clear_view_yaw, points
 from cfvs_maniskill.policies.base import Action, Agent, Observation
 from cfvs_maniskill.policies.cfvs.config import CFVSConfig
 from cfvs_maniskill.policies.cfvs.oakn import keypoint_spread, weighted_keypoints
+from cfvs_maniskill.policies.cfvs.sightings import Sightings
 from cfvs_maniskill.policies.interface import TaskSpec, insertion_pose
 from cfvs_maniskill.policies.networks import load_weights
 from cfvs_maniskill.task_dof import constrain
@@ -145,6 +146,7 @@ class CFVSAgent(Agent):
         self.stage, self.fine_steps = "coarse", 0
         self.correction = IDENTITY  # the camera's errors change with the episode
         self.peg_fix = None
+        self.sightings = Sightings()  # the fine looks' measurements of the hole
         self.blind_x: list[np.ndarray] = []  # tool x axes whose fine look saw nothing
         self.rise = 0.0  # how much further back than the pre-insertion pose it servoes
         self.phase, self.estimate = "", None
@@ -219,6 +221,7 @@ class CFVSAgent(Agent):
                 return a, "OPN offset"
             H, where = align_axis(H, n), "axis from the rim"
         if self.cfg.opening_fit:
+            world = self.sightings.cloud(world)
             seen = fit_opening(world, H, self.half, round_opening=self.round_opening)
             where += ", OPN position" if seen is None else ", centre from the opening"
             H = H if seen is None else seen
@@ -227,6 +230,9 @@ class CFVSAgent(Agent):
                 H = H.copy()
                 H[:3, 3] += level * H[:3, 2]
                 where += ", height from the face"
+            H = self.sightings.add(H, seen is not None, float(np.linalg.norm(a[:3])))
+            if len(self.sightings) > 1:
+                where += f" (mean of {len(self.sightings)} looks)"
         pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)
         return L.fine_action(tcp, pose), where
 

@@ -1,0 +1,67 @@
+"""The fine stage's estimate of the hole: every look's measurement of one hole that does not
+move, fused, instead of the last look alone.
+
+Each fine look measures the hole frame in the world: the opening fitted on its face
+(perception/opening.py, a few tenths of a millimetre) or, where the fit finds no opening in
+that view, OPN's position (1-3 mm, and further off the further the peg is from where it
+was trained to look). Taken one at a time, a look that sees no opening undoes the one
+before that did, and the peg moves between the two until the loop's iterations run out.
+Here the hole's position is the inverse-variance weighted mean of all the looks (each
+look's spread from its kind, growing with the move it asks for); its orientation is
+the latest look's of the surest kind (the fit turns a square onto its walls). The fit
+itself reads the points of the last few looks: a passive stereo camera on a plain part
+puts too few on the opening's edge in one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SIGMA_FIT = 0.0005
+"""A look whose opening was fitted on its face: its position's spread (m; the fit's
+lateral error p50 / p90 0.35 / 0.86 mm on the development views, perception/opening.py)."""
+SIGMA_OPN = 0.0015
+"""A look from OPN's position alone (m; its error p50 / p90 1.3 / 2.6 mm on the same
+views, the peg at the pose it was trained to reach)."""
+SPREAD_PER_MOVE = 0.25
+"""Either kind's spread grows by this share of the move the look asks for: further from
+the pose OPN was trained to reach, its estimate is further off, and the fit, which starts
+from it and moves it 6 mm at most, with it."""
+
+LOOKS = 3
+"""The opening is fitted to the points of this many latest looks."""
+
+
+@dataclass
+class Sightings:
+    """The looks of one episode's fine stage."""
+
+    positions: list[np.ndarray] = field(default_factory=list)
+    weights: list[float] = field(default_factory=list)
+    best: tuple[float, np.ndarray] | None = None
+    """(spread, rotation) of the latest look of the surest kind."""
+    clouds: list[np.ndarray] = field(default_factory=list)
+
+    def cloud(self, world: np.ndarray) -> np.ndarray:
+        """A look's world points `world` with those of the LOOKS - 1 looks before it (the
+        hole does not move; each look's noise and shadows are its own)."""
+        self.clouds = [*self.clouds, world][-LOOKS:]
+        return np.concatenate(self.clouds)
+
+    def add(self, H: np.ndarray, fitted: bool, move: float) -> np.ndarray:
+        """Take look `H` (4x4 hole frame in the world), `fitted` on the opening or from
+        OPN's position when the peg is `move` (m) from OPN's target; the fused frame."""
+        sigma = float(np.hypot(SIGMA_FIT if fitted else SIGMA_OPN, SPREAD_PER_MOVE * move))
+        self.positions.append(H[:3, 3].copy())
+        self.weights.append(1.0 / sigma**2)
+        if self.best is None or sigma <= self.best[0]:
+            self.best = (sigma, H[:3, :3].copy())
+        out = np.eye(4)
+        out[:3, :3] = self.best[1]
+        out[:3, 3] = np.average(self.positions, axis=0, weights=self.weights)
+        return out
+
+    def __len__(self) -> int:
+        return len(self.positions)

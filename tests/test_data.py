@@ -197,8 +197,9 @@ def test_part_like_procedural_bodies_are_tall_with_inclined_faces_around_the_hol
 def test_resume_after_kill_gives_exactly_n_unique_samples(tmp_path):
     """SIGKILL a collection after its first chunk, run it again: N samples, each once,
     identical to an uninterrupted collection."""
-    # 60 samples: two chunks of collect.CHUNK = 40, the kill lands in the second.
-    args = ["--task", "PegInsert3DoF", "--kind", "coarse", "--samples", "60", "--points", "256"]
+    # 20 samples: two chunks of 10, the kill lands in the second.
+    args = ["--task", "PegInsert3DoF", "--kind", "coarse", "--samples", "20", "--chunk", "10"]
+    args += ["--points", "256"]
     out = tmp_path / "killed.h5"
     cmd = [sys.executable, "-m", "cfvs_maniskill.data", "collect", *args, "--out", str(out)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -216,9 +217,9 @@ def test_resume_after_kill_gives_exactly_n_unique_samples(tmp_path):
     r = run_cli("cfvs_maniskill.data", "collect", *args, "--out", str(ref))
     assert r.returncode == 0, r.stderr[-2000:]
     with h5py.File(out) as a, h5py.File(ref) as b:
-        assert np.array_equal(a["sample_index"][:], np.arange(60))
+        assert np.array_equal(a["sample_index"][:], np.arange(20))
         pa = a["points"][:]
-        assert len(np.unique(pa.reshape(60, -1), axis=0)) == 60
+        assert len(np.unique(pa.reshape(20, -1), axis=0)) == 20
         assert np.array_equal(pa, b["points"][:])
         assert list(a["object"].asstr()[:]) == list(b["object"].asstr()[:])
     assert not parts.exists()
@@ -229,6 +230,8 @@ def test_mismatched_resume_names_the_field(coarse_file):
         collect(CollectArgs(task="PegInsert6DoF", kind="fine", samples=20, out=coarse_file))
     with pytest.raises(DatasetError, match="field 'num_points'"):
         collect(CollectArgs(task="PegInsert6DoF", kind="coarse", samples=20, out=coarse_file))
+    with pytest.raises(DatasetError, match="--chunk: expected a positive number"):
+        collect(CollectArgs(task="PegInsert6DoF", kind="coarse", chunk=0, out=coarse_file))
 
 
 def test_show_draws_a_png(coarse_file, fine_file, tmp_path):

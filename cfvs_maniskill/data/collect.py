@@ -46,6 +46,8 @@ class CollectArgs:
     + confidence), fine (CFVS's OPN: actions) or kovis (images + motion to the goal)."""
     samples: int = 2000
     """Total number of samples the file should hold."""
+    chunk: int = CHUNK
+    """Samples per crash-safe chunk file: a killed collection loses at most this many."""
     out: Path = Path("data/coarse.h5")
     """Output HDF5 file."""
     objects: tuple[str, ...] = ("train",)
@@ -240,6 +242,10 @@ def collect(args: CollectArgs) -> int:
         kinds[args.kind].check(args)
     except ValueError as e:
         raise store.DatasetError(str(e)) from None
+    if args.chunk < 1:
+        raise store.DatasetError(
+            f"--chunk: expected a positive number of samples, got {args.chunk}"
+        )
     attrs = file_attrs(args, task)
     have = store.existing_count(out, attrs)
     if have >= args.samples:
@@ -259,7 +265,7 @@ def collect(args: CollectArgs) -> int:
             rows.append(row)
             i += 1
             bar.update(1)
-            if len(rows) == CHUNK or i == args.samples:
+            if len(rows) == args.chunk or i == args.samples:
                 store.write_part(out, first, {k: np.stack([r[k] for r in rows]) for k in rows[0]})
                 first, rows = i, []
     finally:

@@ -788,7 +788,8 @@ def test_a_run_over_cameras_on_two_mounts_resumes_and_other_weights_are_named():
 def test_rerun_stale_runs_only_the_stale_records_again_and_never_a_frozen_sets(tmp_path):
     """--rerun-stale on two of the README's oracle records, one of them made stale (another
     episode code, uncommitted): that one leaves the folder and runs again, the other stays
-    as it was. On a frozen set's results it is refused before anything is written."""
+    as it was, and so does a stale record of an agent the command does not run. On a frozen
+    set's results it is refused before anything is written."""
     import gzip
 
     src = ROOT / "results/headline/main/episodes.jsonl.gz"
@@ -797,9 +798,12 @@ def test_rerun_stale_runs_only_the_stale_records_again_and_never_a_frozen_sets(t
     mine = [r for r in map(json.loads, lines) if r["key"] in keys]
     assert len(mine) == 2, [r["key"] for r in mine]
     current, old = sorted(mine, key=lambda r: r["key"])
-    old = {**old, "provenance": {**old["provenance"], "code": "v0+dirty", "code_fingerprint": "0"}}
+    stale = {"code": "v0+dirty", "code_fingerprint": "0"}
+    old = {**old, "provenance": {**old["provenance"], **stale}}
+    other = {**old, "agent": "icp", "key": old["key"].replace("oracle", "icp")}
     gz = tmp_path / "episodes.jsonl.gz"
-    gz.write_bytes(gzip.compress("".join(json.dumps(r) + "\n" for r in (current, old)).encode()))
+    text = "".join(json.dumps(r) + "\n" for r in (current, old, other))
+    gz.write_bytes(gzip.compress(text.encode()))
     args = ["--tasks", "PegInsert3DoF", "--agents", "oracle", "--objects", "cuboid_test_1",
             "--init-errors", "small", "--episodes-per-object", "2", "--seed", "0",
             "--workers", "1", "--rerun-stale"]  # fmt: skip
@@ -808,9 +812,10 @@ def test_rerun_stale_runs_only_the_stale_records_again_and_never_a_frozen_sets(t
     assert "1 stale records removed" in r.stdout and "1 to run" in r.stdout, r.stdout
     assert "stale: episode code changed since v0+dirty (1 records)" in r.stdout
     lines = gzip.decompress(gz.read_bytes()).decode().splitlines()
-    assert len(lines) == 2 and not (tmp_path / "episodes.jsonl").exists()  # folded, no twins
+    assert len(lines) == 3 and not (tmp_path / "episodes.jsonl").exists()  # folded, no twins
     recs = {x["key"]: x for x in map(json.loads, lines)}
-    assert set(recs) == {current["key"], old["key"]} and recs[current["key"]] == current
+    assert set(recs) == {current["key"], old["key"], other["key"]}
+    assert recs[current["key"]] == current and recs[other["key"]] == other
     assert recs[old["key"]]["provenance"]["code"] != "v0+dirty"
     assert recs[old["key"]]["seed"] == old["seed"]
 

@@ -250,7 +250,7 @@ def main(args: EvalArgs) -> int:
         with exclusive(path):
             done = read_done(path)
             if args.rerun_stale:
-                done = drop_stale(path, done)
+                done = drop_stale(path, done, {j.key for j in jobs})
             if diff := differences(done, now):
                 _fail(
                     f"{path} holds records made with other settings; resume with the settings "
@@ -261,9 +261,10 @@ def main(args: EvalArgs) -> int:
         _fail(str(e))
 
 
-def drop_stale(path: Path, done: dict[str, dict]) -> dict[str, dict]:
-    """`done` without its stale records (report/trace.py), which leave the results files;
-    one line per reason says how many went."""
+def drop_stale(path: Path, done: dict[str, dict], wanted: set[str]) -> dict[str, dict]:
+    """`done` without its stale records (report/trace.py) of the jobs `wanted` (the
+    command's: the records of agents or tasks it does not run stay), which leave the
+    results files; one line per reason says how many went."""
     from collections import Counter
 
     from cfvs_maniskill.eval.results import drop
@@ -272,7 +273,9 @@ def drop_stale(path: Path, done: dict[str, dict]) -> dict[str, dict]:
     reasons: Counter = Counter()
     stale = set()
     for key, rec in done.items():
-        if not rec.get("crashed") and (why := trace.stale_reasons(rec, trace.resolve(rec))):
+        if key not in wanted or rec.get("crashed"):
+            continue
+        if why := trace.stale_reasons(rec, trace.resolve(rec)):
             stale.add(key)
             reasons.update(why)
     drop(path, stale)

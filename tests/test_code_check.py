@@ -94,6 +94,36 @@ def test_check_names_the_cells_a_branch_changing_an_agent_leaves_stale(monkeypat
     assert check_as_if_today(monkeypatch, docs_only) == 0
 
 
+def test_records_of_uncommitted_edits_elsewhere_agree_with_clean_records_of_that_code():
+    """A record made with uncommitted edits (`+dirty`) whose episode code is its commit's
+    (the edits lay in docs or the report) has the same signature as a clean record of
+    that commit, so their cell is not called mixed; one whose episode code differs has
+    another."""
+    import subprocess
+
+    from cfvs_maniskill.report import trace
+
+    head = subprocess.run(
+        ["git", "-C", str(ROOT), "rev-parse", "--short=12", "HEAD"],
+        capture_output=True, text=True, check=True,
+    ).stdout.strip()  # fmt: skip
+    files = {"weights": {"agents/cfvs/round/oakn.pt": "0" * 64}, "sensor": {"sha256": "1"}}
+    same = trace.fingerprint_at(head)
+    assert same is not None
+
+    def record(code: str, fingerprint: str | None = None) -> dict:
+        made = {"code": code, **files} | ({"code_fingerprint": fingerprint} if fingerprint else {})
+        return {"agent": "cfvs", "task": "PegInsert3DoF", "provenance": made}
+
+    clean, dirty = record(head), record(f"{head}+dirty", same)
+    edited = record(f"{head}+dirty", "0" * 16)
+    sig = trace.signature(trace.resolve(clean))
+    assert trace.signature(trace.resolve(dirty)) == sig
+    assert trace.signature(trace.resolve(edited)) != sig
+    assert not any(why.startswith("mixed") for why in trace.cell_status([clean, dirty])[1])
+    assert any(why.startswith("mixed") for why in trace.cell_status([clean, edited])[1])
+
+
 def test_every_module_of_episode_code_is_in_some_agents_scope():
     """An agent's scope follows the package's import statements (report/scope.py); a module
     no agent's episodes import (reached some other way, by a name in a string) would leave

@@ -115,6 +115,20 @@ def agent_fingerprint_at(code: str | None, agent: str) -> str | None:
     return _module_fingerprint_at(code, agent_module(agent))
 
 
+def _agent_fingerprint_of(p: dict, agent: str) -> str | None:
+    """`agent_fingerprint_at` the record's commit; for a record made with uncommitted edits
+    (`+dirty`) whose episode code was still its commit's, or is today's (the edits lay
+    elsewhere), that code's: its records then agree with clean ones of the same code."""
+    code, mine = str(p.get("code")), p.get("code_fingerprint")
+    if "+" in code and mine is not None:
+        base = code.split("+", 1)[0]
+        if mine == fingerprint_at(base):
+            code = base
+        elif mine == code_fingerprint():
+            return agent_fingerprint_at(None, agent)
+    return agent_fingerprint_at(code, agent)
+
+
 @functools.cache
 def _module_fingerprint_at(code: str | None, module: str | None) -> str | None:
     sources = _sources_today() if code is None else _sources_at(code)
@@ -133,7 +147,7 @@ def resolve(rec: dict) -> dict:
     if p and "code_fingerprint" not in p:
         p = {**p, "code_fingerprint": fingerprint_at(str(p.get("code")))}
     if p and "agent" in rec:
-        p = {**p, "agent_fingerprint": agent_fingerprint_at(str(p.get("code")), rec["agent"])}
+        p = {**p, "agent_fingerprint": _agent_fingerprint_of(p, rec["agent"])}
     if p.get("reconstructed") != "git":
         return p
     commit = p["code"]

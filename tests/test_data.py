@@ -682,6 +682,37 @@ def test_stands_raise_the_opening_or_stand_beside_it_and_are_a_training_family(t
     assert 2 <= raised <= 6, raised
 
 
+def test_decoys_cut_openings_the_peg_does_not_fit_beside_it_and_are_a_training_family(
+    tmp_path,
+):
+    """`decoys` (a training family): blind openings of other sizes keep the opening's wall
+    whole and lie at least 1 cm beyond it, their floors 1-4 cm down; every body drawn is
+    one watertight piece with at least one of them."""
+    import trimesh
+    import yaml
+
+    from cfvs_maniskill.data import shapes as S
+    from cfvs_maniskill.data.procedural import TRAINING_FAMILIES
+
+    keep, top, plate, hole = plate_with_opening()
+    for seed in range(6):
+        body, level = S.add_other_openings(np.random.default_rng(seed), plate, hole, top, keep)
+        assert level == top and body.volume < plate.volume, seed
+        assert_wall_ring_at(body, hole, keep, top, seed, samples=40000, more_than=50)
+        v, faces = trimesh.sample.sample_surface(body, 40000, seed=seed)
+        floor = (body.face_normals[faces, 2] > 0.99) & (v[:, 2] < top - 0.009)
+        assert floor.sum() > 20 and v[floor, 2].min() > top - 0.041, seed
+        assert np.linalg.norm(v[floor, :2] - hole, axis=1).min() > keep + 0.01, seed
+    assert "decoys" in TRAINING_FAMILIES
+    folder, names = procedural_specs(5, 3, "square", 0.004, 0.045, "decoys", folder=tmp_path)
+    for name in names:
+        spec = yaml.safe_load((folder / f"{name}.yaml").read_text())
+        body = trimesh.load(folder / spec["body"]["mesh"]["file"])
+        assert body.is_watertight and len(body.split(only_watertight=False)) == 1, name
+        bottom = body.face_normals[:, 2] > 0.99
+        assert np.any(bottom & (body.triangles_center[:, 2] < body.bounds[1, 2] - 0.009)), name
+
+
 def test_a_dataset_can_be_collected_on_another_mount_than_the_profiles():
     """`--mount NAME` puts the camera on a named mount for every scene of the file (KOVIS's
     own mount given way to), and the file says so (a resume must match it)."""

@@ -210,6 +210,7 @@ FAMILIES = {
     "manifolds": "m",
     "stands": "s",
     "castings": "a",
+    "decoys": "d",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

@@ -33,6 +33,11 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   the time the opening itself on a riser 1-13 cm above the face: the opening need not be
   on the body's largest face, and a tall thing beside it need not hold it. A training
   family: the coarse network's bodies otherwise never raise the opening above the rest.
+- `decoys`: plates and discs 8-30 cm across, the opening anywhere on the face, with one to
+  three blind openings the peg does not fit (round or square, half to nearly twice its
+  width, 1-12 cm from it) and up to two of: a wall, a step, pockets, ribs, a counterbore.
+  A training family: the coarse network's other bodies never show an opening wider than
+  the peg's, so it had no reason to tell one from the peg's own.
 - `castings`: cast plates and discs up to 30 cm, the opening anywhere on the face, with two
   or three of: the opening on a hub braced by gussets, in a channel between two walls, a
   chamfered edge falling away beside it, a raised ring round it, a row of lightening
@@ -771,6 +776,52 @@ with two or three of `CASTING_FEATURES` (the bevel after what stands on the face
 hub last: it stands where the opening is)."""
 
 
+def add_other_openings(rng, mesh, hole, top, keep):
+    """One to three blind openings the peg does not fit, round or square (either shape,
+    whatever the peg's), 0.5-0.85 or 1.15-1.8 times the opening's half width, 1-4 cm deep,
+    1-12 cm from its wall, where the face holds them whole."""
+    half = (keep - MIN_WALL) / np.sqrt(2)  # the opening's half width
+    cuts, wanted = [], int(rng.integers(1, 4))
+    for _ in range(8 * wanted):
+        r = half * (rng.uniform(0.5, 0.85) if rng.random() < 0.4 else rng.uniform(1.15, 1.8))
+        reach = r * np.sqrt(2)  # a square one's corner
+        c = hole + _unit(rng.uniform(0, 2 * np.pi)) * (keep + reach + rng.uniform(0.01, 0.12))
+        if not _solid_under(mesh, c, reach, top):
+            continue  # off the face's edge
+        d = rng.uniform(0.01, 0.04)
+        if rng.random() < 0.5:
+            cut = trimesh.creation.cylinder(r, 2 * d, 64)
+            cut.apply_translation([*c, top])
+        else:
+            cut = box_at([2 * r, 2 * r, 2 * d], [*c, top], rng.uniform(0, np.pi / 2))
+        cuts.append(cut)
+        if len(cuts) == wanted:
+            break
+    return _minus(mesh, cuts), top
+
+
+DECOY_COMPANIONS = (add_wall, add_step, add_pockets, add_ribs, add_counterbore)
+
+
+def decoy_body(rng, peg, clearance, folder: Path, name: str):
+    """A plate or disc 8-30 cm across, 2-10 cm thick, the opening anywhere on its face, with
+    openings of other sizes and shapes (`add_other_openings`) and up to two of
+    `DECOY_COMPANIONS` (a counterbore last: it lowers the face round the opening); None when
+    no other opening fits or the body is not one piece."""
+    keep = keep_clear(peg, clearance)
+    top = rng.uniform(0.02, 0.10)
+    plain, hole = _plate_or_disc(rng, keep, top, (0.08, 0.30))
+    mesh, top = add_other_openings(rng, plain, hole, top, keep)
+    if mesh.volume > plain.volume - 1e-7:
+        return None  # no other opening fits on this face: draw again
+    chosen = rng.choice(DECOY_COMPANIONS, size=int(rng.integers(0, 3)), replace=False)
+    for add in sorted(chosen, key=lambda f: f is add_counterbore):
+        mesh, top = add(rng, mesh, hole, top, keep)
+    if len(mesh.split(only_watertight=False)) > 1:
+        return None  # a step cut the part in two, or a rib stands off its edge: draw again
+    return _write(mesh, hole, top, folder, name)
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
@@ -783,6 +834,7 @@ FAMILIES: dict[str, Draw] = {
     "manifolds": manifold_body,
     "stands": stand_body,
     "castings": casting_body,
+    "decoys": decoy_body,
 }
 HELD_OUT_FAMILIES = (
     *("composite", "grooved", "plates", "fixtures", "housings", "manifolds", "castings"),

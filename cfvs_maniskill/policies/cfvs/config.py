@@ -53,8 +53,8 @@ class CFVSConfig:
     stands out. Fine: at the level of the face just outside it (walls and flanges beside
     the opening pull OPN's height up), centred on its edge and walls (a square's sides, a
     round hole's circle), a square turned onto its walls (perception/opening.py). Each fine
-    look is one measurement of a hole that does not move: the opening is fitted to the last
-    three looks' points, and the hole's position is the weighted mean of every look's
+    look is one measurement of a hole that does not move: the opening is fitted to the
+    points of the last `sightings.LOOKS` looks, and the hole's position is the weighted mean of every look's
     (policies/cfvs/sightings.py). False: OAKN's and OPN's positions and yaw, each look on
     its own."""
     clear_view: bool = True

@@ -343,14 +343,18 @@ def add_decoys(rng, mesh, hole, top, keep):
         c = hole + _unit(rng.uniform(0, 2 * np.pi)) * (
             keep + r * np.sqrt(2) + rng.uniform(0.01, 0.06)
         )
-        d = rng.uniform(0.01, 0.03)
-        if rng.random() < 0.5:
-            cut = trimesh.creation.cylinder(r, 2 * d, 64)
-            cut.apply_translation([*c, top])
-        else:
-            cut = box_at([2 * r, 2 * r, 2 * d], [*c, top], rng.uniform(0, np.pi / 2))
-        cuts.append(cut)
+        cuts.append(_blind_opening(rng, r, rng.uniform(0.01, 0.03), c, top))
     return _minus(mesh, cuts), top
+
+
+def _blind_opening(rng, r: float, depth: float, centre, top: float) -> trimesh.Trimesh:
+    """The cut of a blind opening `depth` deep into the face at `top`, at `centre` (x, y):
+    round of radius `r`, or half the time square of half side `r` at a random turn."""
+    if rng.random() < 0.5:
+        cut = trimesh.creation.cylinder(r, 2 * depth, 64)
+        cut.apply_translation([*centre, top])
+        return cut
+    return box_at([2 * r, 2 * r, 2 * depth], [*centre, top], rng.uniform(0, np.pi / 2))
 
 
 PLATE_FEATURES = (add_wall, add_drop, add_island, add_decoys)
@@ -788,13 +792,7 @@ def add_other_openings(rng, mesh, hole, top, keep):
         c = hole + _unit(rng.uniform(0, 2 * np.pi)) * (keep + reach + rng.uniform(0.01, 0.12))
         if not _solid_under(mesh, c, reach, top):
             continue  # off the face's edge
-        d = rng.uniform(0.01, 0.04)
-        if rng.random() < 0.5:
-            cut = trimesh.creation.cylinder(r, 2 * d, 64)
-            cut.apply_translation([*c, top])
-        else:
-            cut = box_at([2 * r, 2 * r, 2 * d], [*c, top], rng.uniform(0, np.pi / 2))
-        cuts.append(cut)
+        cuts.append(_blind_opening(rng, r, rng.uniform(0.01, 0.04), c, top))
         if len(cuts) == wanted:
             break
     return _minus(mesh, cuts), top

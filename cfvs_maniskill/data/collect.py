@@ -64,9 +64,9 @@ class CollectArgs:
     faces falling away from the hole, a curved boss beside it (not with the features)."""
     procedural_family: str = "plain"
     """With --procedural: the body family, one of plain, features, parts, ribs, pockets,
-    narrow, stands, decoys (data/procedural.py, data/shapes.py; the frozen sets' families are held
-    out of training); --procedural-features and --procedural-parts are the same as features
-    and parts."""
+    narrow, stands, decoys (data/procedural.py, data/shapes.py; the frozen sets' families
+    are held out of training); --procedural-features and --procedural-parts are the same
+    as features and parts."""
     points: int = 1024
     """Points per sample after sampling (fixed N)."""
     seed: int = 0

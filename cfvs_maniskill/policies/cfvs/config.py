@@ -54,9 +54,9 @@ class CFVSConfig:
     the opening pull OPN's height up), centred on its edge and walls (a square's sides, a
     round hole's circle), a square turned onto its walls (perception/opening.py). Each fine
     look is one measurement of a hole that does not move: the opening is fitted to the
-    points of the last `sightings.LOOKS` looks, and the hole's position is the weighted mean of every look's
-    (policies/cfvs/sightings.py). False: OAKN's and OPN's positions and yaw, each look on
-    its own."""
+    points of the last `sightings.LOOKS` looks, and the hole's position is the weighted
+    mean of every look's (policies/cfvs/sightings.py). False: OAKN's and OPN's positions
+    and yaw, each look on its own."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the

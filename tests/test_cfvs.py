@@ -574,3 +574,29 @@ def test_a_look_that_finds_no_opening_does_not_undo_one_that_did():
     for i in range(LOOKS + 2):
         cloud = s.cloud(np.full((5, 3), float(i)))
     assert len(cloud) == 5 * LOOKS and cloud.min() == 2.0
+
+
+def test_a_6dof_look_whose_ring_shows_no_face_is_fused_like_any_other():
+    """Every fine look takes one path: in 6-DoF a look whose ring shows no face (here the
+    cloud holds nothing) keeps OPN's axis and counts as OPN alone, so the 40 mm jump it asks
+    for moves a fitted look's estimate by little (taken whole, such looks drove pegs
+    centimetres into the part)."""
+    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+    from cfvs_maniskill.envs.task_config import load_task
+    from cfvs_maniskill.geometry import make
+    from cfvs_maniskill.perception import labels as L
+    from cfvs_maniskill.policies.interface import insertion_pose
+
+    spec = TaskSpec.of(load_task(resources.bundled("tasks") / "PegInsert6DoF.yaml"))
+    agent = CFVSAgent(spec)
+    agent.reset(0)
+    H = make(np.eye(3), [0.5, 0.0, 0.05])
+    tcp = insertion_pose(spec.peg, H, -PRE_INSERT_HEIGHT, np.eye(4))
+    agent.sightings.add(H, True, 0.0)  # an earlier look, fitted on the opening
+    far = H.copy()
+    far[:3, 3] += [0.04, 0.0, 0.0]
+    a = L.fine_action(tcp, insertion_pose(spec.peg, far, -PRE_INSERT_HEIGHT, tcp))
+    out, where = agent.refine(a, np.zeros((0, 3)), tcp)
+    assert where.startswith("OPN axis, OPN position") and "mean of 2 looks" in where
+    moved = L.hole_frame_from_pre_insertion(L.apply_action(tcp, out))
+    assert np.linalg.norm(moved[:3, 3] - H[:3, 3]) < 0.002

@@ -209,17 +209,18 @@ class CFVSAgent(Agent):
         at (`world`: the fine view's object points): in 6-DoF the hole's axis from the
         face's normal (`rim_plane`; 3- and 4-DoF holes are upright), then the centre (and a
         square's yaw) from the opening seen on that face and its height from the face
-        (`opening_fit`). Returns the offset and where it came from; (a, "OPN offset") when
-        the 6-DoF ring gives no face."""
+        (`opening_fit`), fused with the looks before (sightings.py). Every look takes this
+        path: where the 6-DoF ring shows no face, the look keeps OPN's axis and counts as
+        OPN's measurement, so one far-off look does not undo the others. Returns the offset
+        and where it came from."""
         T = L.apply_action(tcp, a)
         T = T if self.task.dof == 6 else self.constrain(T, tcp)
         H = L.hole_frame_from_pre_insertion(T)
-        where = "upright axis"
+        where, axis_seen = "upright axis", True
         if self.task.dof == 6:
             n = self.rim_axis(world, H)
-            if n is None:
-                return a, "OPN offset"
-            H, where = align_axis(H, n), "axis from the rim"
+            axis_seen = n is not None
+            H, where = (align_axis(H, n), "axis from the rim") if axis_seen else (H, "OPN axis")
         if self.cfg.opening_fit:
             world = self.sightings.cloud(world)
             seen = fit_opening(world, H, self.half, round_opening=self.round_opening)
@@ -230,7 +231,8 @@ class CFVSAgent(Agent):
                 H = H.copy()
                 H[:3, 3] += level * H[:3, 2]
                 where += ", height from the face"
-            H = self.sightings.add(H, seen is not None, float(np.linalg.norm(a[:3])))
+            measured = seen is not None and axis_seen  # else as uncertain as OPN alone
+            H = self.sightings.add(H, measured, float(np.linalg.norm(a[:3])))
             if len(self.sightings) > 1:
                 where += f" (mean of {len(self.sightings)} looks)"
         pose = insertion_pose(self.peg, H, -PRE_INSERT_HEIGHT, T)

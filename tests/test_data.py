@@ -653,6 +653,42 @@ def test_casting_features_stand_where_they_say_and_the_family_is_held_out(tmp_pa
     assert_drawn_whole_and_held_out("castings", tmp_path, at_least=4)
 
 
+def test_wheel_features_stand_where_they_say_and_the_family_is_held_out(tmp_path):
+    """`wheels` (release 1.5.0's frozen set): windows go through the part (the table seen
+    through them), the spoked web is recessed below the face, ribs and the rim stand above
+    it, teeth notch the edge, and none touches the opening's wall; training never draws
+    the family."""
+    import trimesh
+
+    from cfvs_maniskill.data import shapes as S
+
+    keep, top, hole = S.keep_clear("square", 0.004), 0.04, np.array([0.03, -0.02])
+    disc = trimesh.creation.cylinder(0.12, top, 128)
+    disc.apply_translation([0, 0, top / 2])
+
+    def area_facing(mesh, z_sign: float, at: float) -> float:
+        n, c = mesh.face_normals, mesh.triangles_center
+        on = (n[:, 2] * z_sign > 0.999) & (np.abs(c[:, 2] - at) < 1e-6)
+        return float(mesh.area_faces[on].sum())
+
+    for seed in range(4):
+        for add in S.WHEEL_FEATURES:
+            body, level = add(np.random.default_rng(seed), disc, hole, top, keep)
+            assert level == top, (add.__name__, seed)
+            assert_wall_ring_at(body, hole, keep, top, seed, samples=40000, more_than=50)
+            stands = add in (S.add_radial_ribs, S.add_outer_rim)
+            assert (body.bounds[1, 2] > top + 0.004) == stands, (add.__name__, seed)
+            assert (body.volume > disc.volume) == stands, (add.__name__, seed)
+        windows, _ = S.add_windows(np.random.default_rng(seed), disc, hole, top, keep)
+        cut_top = area_facing(disc, 1, top) - area_facing(windows, 1, top)
+        cut_bottom = area_facing(disc, -1, 0.0) - area_facing(windows, -1, 0.0)
+        assert cut_top > 3 * np.pi * 0.006**2 and cut_bottom == pytest.approx(cut_top, rel=0.01)
+        web, _ = S.add_spoked_web(np.random.default_rng(seed), disc, hole, top, keep)
+        floors = web.triangles_center[(web.face_normals[:, 2] > 0.999)][:, 2]
+        assert np.any((floors < top - 0.004) & (floors > 0.3 * top)), seed  # the recess
+    assert_drawn_whole_and_held_out("wheels", tmp_path, at_least=4)
+
+
 def test_stands_raise_the_opening_or_stand_beside_it_and_are_a_training_family(tmp_path):
     """`stands` (a training family): posts keep off the opening's wall and stand 1-13 cm
     tall; most bodies put the opening on a riser above the rest of the face, so the tallest

@@ -211,6 +211,7 @@ FAMILIES = {
     "stands": "s",
     "castings": "a",
     "decoys": "d",
+    "wheels": "w",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

@@ -43,6 +43,11 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   chamfered edge falling away beside it, a raised ring round it, a row of lightening
   pockets. Held out: release 1.4.0's frozen set (`assets/generalisation_castings/`) is
   made of it.
+- `wheels`: wheels, pulleys and gear blanks 10-30 cm across, the opening at the centre or
+  anywhere on the face, with two or three of: round windows through the part round the
+  opening (the table seen through them), the web round a hub recessed between spokes,
+  radial ribs, a rim standing round the edge, gear teeth. Held out: release 1.5.0's frozen
+  set (`assets/generalisation_wheels/`) is made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -820,6 +825,116 @@ def decoy_body(rng, peg, clearance, folder: Path, name: str):
     return _write(mesh, hole, top, folder, name)
 
 
+def _wheel(rng, keep: float, top: float, across: tuple[float, float]):
+    """A wheel's disc (its diameter within `across`, m), `top` thick, the opening at its
+    centre or, a third of the time (a crank, a cam), anywhere on its face: (mesh, hole x y)."""
+    r = rng.uniform(across[0] / 2, across[1] / 2)
+    mesh = trimesh.creation.cylinder(r, top, 128)
+    mesh.apply_translation([0, 0, top / 2])
+    if rng.random() < 2 / 3:
+        return mesh, np.zeros(2)
+    return mesh, _unit(rng.uniform(0, 2 * np.pi)) * (r - keep) * np.sqrt(rng.uniform(0, 0.8))
+
+
+def _disc_radius(mesh: trimesh.Trimesh) -> float:
+    """A wheel's radius (its disc stands centred on the origin)."""
+    return float(mesh.bounds[1, 0])
+
+
+def add_windows(rng, mesh, hole, top, keep):
+    """Three to six round windows through the part, 6-20 mm in radius, evenly round the
+    opening 5-30 mm outside its wall (those wholly on the face): the table seen through
+    them, openings wider than the peg's with no floor."""
+    r = rng.uniform(0.006, 0.02)
+    ring = keep + r + rng.uniform(0.005, 0.03)
+    n, turn = int(rng.integers(3, 7)), rng.uniform(0, 2 * np.pi)
+    cuts = []
+    for k in range(n):
+        c = hole + _unit(turn + 2 * np.pi * k / n) * ring
+        if _solid_under(mesh, c, r, top):
+            cut = trimesh.creation.cylinder(r, 1.0, 48)
+            cut.apply_translation([*c, 0.0])
+            cuts.append(cut)
+    return _minus(mesh, cuts), top
+
+
+def add_spoked_web(rng, mesh, hole, top, keep):
+    """The web round a hub recessed 5-15 mm (at most 60% of the part's height) between
+    three to six spokes 5-15 mm wide left at the face's level: the opening on the hub, its
+    face 4-20 mm wider than the opening's wall, the recess 2-6 cm wide beyond it."""
+    hub = keep + rng.uniform(0.004, 0.02)
+    outer = hub + rng.uniform(0.02, 0.06)
+    d = min(rng.uniform(0.005, 0.015), 0.6 * top)
+    recess = trimesh.creation.annulus(hub, outer, 2 * d, sections=96)
+    recess.apply_translation([*hole, top])
+    n, turn, w = int(rng.integers(3, 7)), rng.uniform(0, np.pi), rng.uniform(0.005, 0.015)
+    spokes = []
+    for k in range(n):
+        a = turn + 2 * np.pi * k / n
+        c = hole + _unit(a) * (hub + outer) / 2
+        spokes.append(box_at([outer - hub + 0.004, w, 2 * d + 0.002], [*c, top], a))
+    return _minus(mesh, [_minus(recess, spokes)]), top
+
+
+def add_radial_ribs(rng, mesh, hole, top, keep):
+    """Three to eight ribs 2-5 mm thick standing 5-20 mm above the face, radiating from
+    3-10 mm outside the opening's wall out 2-8 cm (each standing on the part's floor, so it
+    holds over a recess; near the wheel's edge it runs past it, down to the table)."""
+    start, reach = keep + rng.uniform(0.003, 0.01), rng.uniform(0.02, 0.08)
+    h, thick = rng.uniform(0.005, 0.02), rng.uniform(0.002, 0.005)
+    n, turn = int(rng.integers(3, 9)), rng.uniform(0, np.pi)
+    ribs = []
+    for k in range(n):
+        a = turn + 2 * np.pi * k / n
+        c = hole + _unit(a) * (start + reach / 2)
+        ribs.append(box_at([reach, thick, top + h], [*c, (top + h) / 2 + 0.0005], a))
+    return _union([mesh, *ribs]), top
+
+
+def add_outer_rim(rng, mesh, hole, top, keep):
+    """A rim 4-12 mm wide standing 1-4 cm above the face round the wheel's edge, where it
+    stays 2 cm or more from the opening's wall: the opening in a shallow bowl."""
+    R = _disc_radius(mesh)
+    width, h = rng.uniform(0.004, 0.012), rng.uniform(0.01, 0.04)
+    if R - width - np.linalg.norm(hole) < keep + 0.02:
+        return mesh, top  # too near the opening: the part goes without
+    # 1 mm proud of the disc: a rim flush with its side leaves slivers where the two meet
+    rim = trimesh.creation.annulus(R - width, R + 0.001, top + h, sections=128)
+    rim.apply_translation([0, 0, (top + h) / 2 + 0.0005])
+    return _union([mesh, rim]), top
+
+
+def add_teeth(rng, mesh, hole, top, keep):
+    """Gear teeth: 24-60 notches 2-6 mm deep round the wheel's edge, where they stay 1 cm
+    or more from the opening's wall."""
+    R = _disc_radius(mesh)
+    depth = rng.uniform(0.002, 0.006)
+    if R - depth - np.linalg.norm(hole) < keep + 0.01:
+        return mesh, top
+    n = int(rng.integers(24, 61))
+    w = np.pi * R / n  # half the pitch: notches as wide as the teeth
+    cuts = [
+        box_at([2 * depth, w, 1.0], [*(_unit(a) * R), 0.0], a) for a in np.arange(n) * 2 * np.pi / n
+    ]
+    return _minus(mesh, [_union(cuts)]), top
+
+
+WHEEL_FEATURES = (add_windows, add_spoked_web, add_radial_ribs, add_outer_rim, add_teeth)
+
+
+wheel_body = _part(
+    (0.02, 0.06),
+    (0.10, 0.30),
+    WHEEL_FEATURES,
+    last=(add_windows, add_radial_ribs, add_outer_rim, add_teeth),
+    base=_wheel,
+)
+"""A wheel, pulley or gear blank: a disc 10-30 cm across, 2-6 cm thick, the opening at its
+centre (or, one in three, anywhere on the face), with two or three of `WHEEL_FEATURES`
+(the spoked web first, the windows through what it leaves, the ribs, rim and teeth
+standing on or cut from the rest)."""
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
@@ -833,8 +948,10 @@ FAMILIES: dict[str, Draw] = {
     "stands": stand_body,
     "castings": casting_body,
     "decoys": decoy_body,
+    "wheels": wheel_body,
 }
 HELD_OUT_FAMILIES = (
     *("composite", "grooved", "plates", "fixtures", "housings", "manifolds", "castings"),
+    "wheels",
 )
 """Never drawn for training: the frozen generalisation sets' families."""

@@ -112,6 +112,7 @@ FROZEN_RESULTS = (
     "results/generalisation_housings",
     "results/generalisation_manifolds",
     "results/generalisation_castings",
+    "results/generalisation_wheels",
 )
 """The results folders of the frozen sets (assets/final, assets/generalisation*), relative
 to the checkout: each record there is what its release's one run wrote, never re-run."""

@@ -576,6 +576,23 @@ def test_a_look_that_finds_no_opening_does_not_undo_one_that_did():
     assert len(cloud) == 5 * LOOKS and cloud.min() == 2.0
 
 
+def test_looks_without_a_fit_do_not_move_an_estimate_fitted_on_the_opening():
+    """Once a look has fitted the opening, OPN's position alone no longer moves the hole:
+    here the fit came with a long move (a wide spread), and three nearer OPN looks 20 mm
+    off, each surer by the move alone, would have pulled the mean most of the way."""
+    from cfvs_maniskill.geometry import make
+    from cfvs_maniskill.policies.cfvs.sightings import Sightings
+
+    s = Sightings()
+    out = s.add(make(np.eye(3), [0.120, 0.0, 0.05]), False, 0.04)  # OPN alone, first
+    assert abs(out[0, 3] - 0.120) < 1e-9
+    out = s.add(make(np.eye(3), [0.100, 0.0, 0.05]), True, 0.04)
+    assert abs(out[0, 3] - 0.100) < 1e-9
+    for _ in range(3):
+        out = s.add(make(np.eye(3), [0.120, 0.0, 0.05]), False, 0.004)
+    assert abs(out[0, 3] - 0.100) < 1e-9
+
+
 def test_a_6dof_look_whose_ring_shows_no_face_is_fused_like_any_other():
     """Every fine look takes one path: in 6-DoF a look whose ring shows no face (here the
     cloud holds nothing) keeps OPN's axis and counts as OPN alone, so the 40 mm jump it asks

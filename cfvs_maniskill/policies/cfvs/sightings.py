@@ -9,7 +9,7 @@ before that did, and the peg moves between the two until the loop's iterations r
 Here the hole's position is the inverse-variance weighted mean of the looks of the surest
 kind seen so far (each look's spread growing with the move it asks for): once the opening
 is fitted, OPN's position alone moves it no more (on the development bodies under the D435
-OPN alone was 5-25 mm off where a fit was under 1 mm). Its orientation is the latest
+OPN alone was 7-25 mm off where a fit was under 1 mm). Its orientation is the latest
 look's of the surest kind (the fit turns a square onto its walls). The fit
 itself reads the points of the last few looks: a passive stereo camera on a plain part
 puts too few on the opening's edge in one.

@@ -55,7 +55,8 @@ the stereo cameras' models at the fine stage's standoff, 1-2 mm under `ideal`)."
 INSET_PRIOR = 0.3
 """How strongly the walls' inset is held at zero, per point's square root ..."""
 MAX_INSET = 0.0015
-"""... and at most this: walls appear inside the outline, never outside it."""
+"""... and kept between 0 and this (mixed pixels pull a seen wall inwards, ~0.6 mm in the
+simulated cameras; where a calibration error puts it outwards, the centre takes it)."""
 EDGE_NEAR = 0.003
 """A fit is used only where the cloud shows its outline: points this near it ..."""
 MIN_EDGE_POINTS = 20

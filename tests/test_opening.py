@@ -202,7 +202,7 @@ def test_a_round_opening_is_found_in_a_sparse_stereo_cloud():
 def test_a_square_opening_is_found_in_a_sparse_stereo_cloud(name):
     """Real wrist views under `realistic` (the D405 on plain parts; 4- and 6-DoF, test
     objects, development seed 200): 6-30 face points along each side and the far wall;
-    the fine network's estimate 2.8 and 2.6 mm off, the fit 0.28 and 0.59."""
+    the fine network's estimate 2.8 and 2.6 mm off, the fit 0.28 and 0.59 mm."""
     view = np.load(DATA / name)
     H = view["true_hole"]
     F = fit_opening(view["points"].astype(np.float64), view["estimate"], float(view["half"]))

@@ -10,9 +10,9 @@ Here the hole's position is the inverse-variance weighted mean of the looks of t
 kind seen so far (each look's spread growing with the move it asks for): once the opening
 is fitted, OPN's position alone moves it no more (on the development bodies under the D435
 OPN alone was 7-25 mm off where a fit was under 1 mm). Its orientation is that of the
-look of the surest kind with the smallest spread (the fit turns a square onto its walls). The fit
-itself reads the points of the last few looks: a passive stereo camera on a plain part
-puts too few on the opening's edge in one.
+look of the surest kind with the smallest spread (the fit turns a square onto its walls).
+The fit itself reads the points of the last few looks: a passive stereo camera on a plain
+part puts too few on the opening's edge in one.
 """
 
 from __future__ import annotations

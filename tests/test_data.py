@@ -689,6 +689,43 @@ def test_wheel_features_stand_where_they_say_and_the_family_is_held_out(tmp_path
     assert_drawn_whole_and_held_out("wheels", tmp_path, at_least=4)
 
 
+def test_link_features_stand_where_they_say_and_the_family_is_held_out(tmp_path):
+    """`links` (release 1.6.0's frozen set): the I-section's web and the knurl's grooves are
+    recessed below the face (the knurl by at most 1.5 mm), the slot and the far bores go
+    through the part, the boss lifts the opening, and none touches the opening's
+    wall; training never draws the family."""
+    import trimesh
+
+    from cfvs_maniskill.data import shapes as S
+
+    keep, top = S.keep_clear("square", 0.004), 0.03
+
+    def area_facing(mesh, z_sign: float, at: float) -> float:
+        n, c = mesh.face_normals, mesh.triangles_center
+        on = (n[:, 2] * z_sign > 0.999) & (np.abs(c[:, 2] - at) < 1e-6)
+        return float(mesh.area_faces[on].sum())
+
+    for seed in range(4):
+        link, hole = S._link(np.random.default_rng(seed), keep, top, (0.08, 0.12))
+        assert link.is_watertight and np.hypot(*link.extents[:2]) > 0.08 + 2 * keep, seed
+        for add in S.LINK_FEATURES:
+            body, level = add(np.random.default_rng(seed), link, hole, top, keep)
+            assert body.is_watertight and (level > top) == (add is S.add_boss), add.__name__
+            assert_wall_ring_at(body, hole, keep, level, seed, samples=40000, more_than=50)
+            floors = body.triangles_center[body.face_normals[:, 2] > 0.999][:, 2]
+            new_floors = floors[(floors > 1e-6) & (floors < top - 1e-6)]
+            if add is S.add_i_section:
+                assert np.any(new_floors < top - 0.0029), seed
+            if add is S.add_knurl:
+                assert len(new_floors) and np.all(new_floors > top - 0.0016), seed
+            if add in (S.add_radial_slot, S.add_far_bores):
+                cut_top = area_facing(link, 1, top) - area_facing(body, 1, top)
+                cut_bottom = area_facing(link, -1, 0.0) - area_facing(body, -1, 0.0)
+                assert cut_top > 1e-5 and cut_bottom == pytest.approx(cut_top, rel=0.02), seed
+        assert isinstance(link, trimesh.Trimesh)
+    assert_drawn_whole_and_held_out("links", tmp_path, at_least=4)
+
+
 def test_stands_raise_the_opening_or_stand_beside_it_and_are_a_training_family(tmp_path):
     """`stands` (a training family): posts keep off the opening's wall and stand 1-13 cm
     tall; most bodies put the opening on a riser above the rest of the face, so the tallest

@@ -212,6 +212,7 @@ FAMILIES = {
     "castings": "a",
     "decoys": "d",
     "wheels": "w",
+    "links": "v",
 }
 """Procedural body families and their file-name tags."""
 MESH_FAMILIES = {"features": _featured_body, "parts": _part_body, **shapes.FAMILIES}

@@ -48,6 +48,11 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
   opening (the table seen through them), the web round a hub recessed between spokes,
   radial ribs, a rim standing round the edge, gear teeth. Held out: release 1.5.0's frozen
   set (`assets/generalisation_wheels/`) is made of it.
+- `links`: links, levers and bellcranks up to 30 cm across, one to three arms from a pivot
+  boss, the opening at the pivot or an arm's end, with two or three of: the arms' web
+  recessed inside flanges (an I-section), a knurled pad round the opening, a slot through
+  the part aimed at it, bores through the arms' other ends, a boss lifting the opening. Held out: release
+  1.6.0's frozen set (`assets/generalisation_links/`) is made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -59,6 +64,7 @@ from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
+import manifold3d as mf
 import numpy as np
 import trimesh
 
@@ -935,6 +941,157 @@ centre (or, one in three, anywhere on the face), with two or three of `WHEEL_FEA
 standing on or cut from the rest)."""
 
 
+def _to_manifold(mesh: trimesh.Trimesh) -> mf.Manifold:
+    return mf.Manifold(
+        mf.Mesh(
+            vert_properties=np.asarray(mesh.vertices, np.float32),
+            tri_verts=np.asarray(mesh.faces, np.uint32),
+        )
+    )
+
+
+def _from_manifold(solid: mf.Manifold) -> trimesh.Trimesh:
+    out = solid.simplify(1e-6).to_mesh()  # no sliver an STL round trip would fold shut
+    return trimesh.Trimesh(out.vert_properties[:, :3], out.tri_verts)
+
+
+def _extruded(region: mf.CrossSection, z0: float, z1: float) -> mf.Manifold:
+    """`region` (a plan) as a solid from height `z0` to `z1` (m)."""
+    return region.extrude(z1 - z0).translate([0.0, 0.0, z0])
+
+
+def _cut(mesh: trimesh.Trimesh, region: mf.CrossSection, z0: float, z1: float):
+    """`mesh` less `region` (a plan) between heights `z0` and `z1` (m)."""
+    return _from_manifold(_to_manifold(mesh) - _extruded(region, z0, z1))
+
+
+def _plan(mesh: trimesh.Trimesh, z: float) -> mf.CrossSection:
+    """The body's section at height `z` (m), as seen from above."""
+    return _to_manifold(mesh).slice(z)
+
+
+def _disc(centre, r: float, sides: int = 64) -> mf.CrossSection:
+    return mf.CrossSection.circle(r, sides).translate(list(map(float, centre)))
+
+
+def _inside(region: mf.CrossSection, points: np.ndarray) -> np.ndarray:
+    """Which of `points` (N x 2) lie in `region` (even-odd over its contours)."""
+    from matplotlib.path import Path as Outline
+
+    count = np.zeros(len(points), int)
+    for loop in region.to_polygons():
+        count += Outline(np.asarray(loop)).contains_points(points)
+    return count % 2 == 1
+
+
+def _link(rng, keep: float, top: float, across: tuple[float, float]):
+    """A link, lever or bellcrank: one to three arms 5-13 cm long from a pivot boss, each
+    the hull of the pivot's disc and a smaller end disc; the opening at the pivot or, a
+    third of the time, at an arm's end: (mesh, hole x y)."""
+    pivot = keep + rng.uniform(0.005, 0.02)
+    n = int(rng.choice([1, 2, 2, 3]))
+    turns = rng.uniform(0, 2 * np.pi) + np.sort(rng.uniform(0, 2 * np.pi, n))
+    while n > 1 and np.min(np.diff(np.r_[turns, turns[0] + 2 * np.pi])) < np.radians(50):
+        turns = rng.uniform(0, 2 * np.pi) + np.sort(rng.uniform(0, 2 * np.pi, n))
+    ends = []
+    plan = _disc([0, 0], pivot)
+    for a in turns:
+        r_end = rng.uniform(max(keep + 0.003, 0.6 * pivot), pivot)
+        ends.append(_unit(a) * rng.uniform(*across))
+        plan = plan + mf.CrossSection.batch_hull([_disc([0, 0], pivot), _disc(ends[-1], r_end)])
+    mesh = _from_manifold(_extruded(plan, 0.0, top))
+    return mesh, (np.zeros(2) if rng.random() < 2 / 3 else ends[int(rng.integers(n))])
+
+
+def add_i_section(rng, mesh, hole, top, keep):
+    """The arms' web recessed 3-12 mm (at most half the part's height) inside flanges 3-8
+    mm wide along the outline, up to a ring 4-15 mm wide left round the opening: an I-beam's
+    section, the opening's face a narrow ring between recesses."""
+    d, flange = min(rng.uniform(0.003, 0.012), 0.5 * top), rng.uniform(0.003, 0.008)
+    web = _plan(mesh, top - 0.0005).offset(-flange, mf.JoinType.Round)
+    web = web - _disc(hole, keep + rng.uniform(0.004, 0.015))
+    return _cut(mesh, web, top - d, top + 0.01), top
+
+
+def add_knurl(rng, mesh, hole, top, keep):
+    """A knurled or diamond-plate pad: two sets of grooves 0.5-1.5 mm deep, 1-2.5 mm wide,
+    5-10 mm apart, crossing at 60-90 deg, on the face from 2-8 mm outside the opening's
+    wall out to 3-8 cm from it: many small edges round the opening."""
+    d, w, pitch = rng.uniform(0.0005, 0.0015), rng.uniform(0.001, 0.0025), rng.uniform(0.005, 0.01)
+    reach = keep + rng.uniform(0.03, 0.08)
+    first = rng.uniform(0, np.pi)
+    grooves = []
+    for a in (first, first + rng.uniform(np.pi / 3, np.pi / 2)):
+        for s in np.arange(-reach, reach, pitch):
+            bar = mf.CrossSection.square([2 * reach, w], center=True).translate([0.0, s])
+            grooves.append(bar.rotate(float(np.degrees(a))).translate(list(map(float, hole))))
+    pad = _disc(hole, reach) - _disc(hole, keep + rng.uniform(0.002, 0.008))
+    cut = mf.CrossSection.batch_boolean(grooves, mf.OpType.Add) ^ pad
+    return _cut(mesh, cut, top - d, top + 0.01), top
+
+
+def add_radial_slot(rng, mesh, hole, top, keep):
+    """An adjusting slot through the part: 6-14 mm wide, 2-6 cm long, pointing at the
+    opening from 5-20 mm outside its wall, with a wall 3-8 mm round it (the table seen
+    through it, a long straight edge aimed at the opening)."""
+    plan = _plan(mesh, 0.0005)
+    w, length = rng.uniform(0.006, 0.014), rng.uniform(0.02, 0.06)
+    gap, edge = rng.uniform(0.005, 0.02), rng.uniform(0.003, 0.008)
+    for a in rng.uniform(0, 360, 60):  # a direction along which the part has room
+        ends = [_disc([keep + gap + w / 2 + t, 0.0], w / 2, 32) for t in (0.0, length)]
+        slot = mf.CrossSection.batch_hull(ends).rotate(a).translate(list(map(float, hole)))
+        if (slot.offset(edge, mf.JoinType.Round) - plan).is_empty():
+            return _cut(mesh, slot, -0.01, top + 0.01), top
+    return mesh, top
+
+
+def add_far_bores(rng, mesh, hole, top, keep):
+    """One or two bores through the part (round or square, half to twice the opening's
+    width, narrower where the part is) 4 cm or more from it with a wall 3-10 mm round them:
+    a link's other ends."""
+    half = keep - MIN_WALL
+    cuts = []
+    for _ in range(int(rng.integers(1, 3))):
+        widest, square, edge = (
+            half * rng.uniform(0.5, 2),
+            rng.random() < 0.4,
+            rng.uniform(0.003, 0.01),
+        )
+        (x0, y0), (x1, y1) = mesh.bounds[0, :2], mesh.bounds[1, :2]
+        for r in [s for s in widest * 0.8 ** np.arange(8) if s >= 0.5 * half]:  # one with room
+            wall = r * (np.sqrt(2) if square else 1.0) + edge
+            room = _plan(mesh, 0.0005).offset(-wall, mf.JoinType.Round)
+            room = room - _disc(hole, keep + 0.04)
+            for cut in cuts:
+                room = room - cut.offset(wall, mf.JoinType.Round)
+            seen = np.c_[rng.uniform(x0, x1, 400), rng.uniform(y0, y1, 400)]
+            seen = seen[_inside(room, seen)]
+            if len(seen):
+                break
+        else:
+            continue
+        bore = mf.CrossSection.square([2 * r, 2 * r], center=True).rotate(rng.uniform(0, 90))
+        cuts.append((bore if square else _disc([0, 0], r)).translate(list(map(float, seen[0]))))
+    if not cuts:
+        return mesh, top
+    return _cut(mesh, mf.CrossSection.batch_boolean(cuts, mf.OpType.Add), -0.01, top + 0.01), top
+
+
+LINK_FEATURES = (add_i_section, add_knurl, add_radial_slot, add_far_bores, add_boss)
+
+
+link_body = _part(
+    (0.05, 0.075),
+    (0.05, 0.13),
+    LINK_FEATURES,
+    last=(add_knurl, add_radial_slot, add_far_bores, add_boss),
+    base=_link,
+)
+"""A link, lever or bellcrank 5-7.5 cm thick (the opening's 48 mm need it), up to 30 cm across (arms 5-13 cm long), the opening at the
+pivot or an arm's end, with two or three of `LINK_FEATURES` (the I-section first; the
+knurl, the slot and the far bores cut what it leaves; a boss on top last)."""
+
+
 FAMILIES: dict[str, Draw] = {
     "ribs": ribbed_body,
     "pockets": pocketed_body,
@@ -949,9 +1106,10 @@ FAMILIES: dict[str, Draw] = {
     "castings": casting_body,
     "decoys": decoy_body,
     "wheels": wheel_body,
+    "links": link_body,
 }
 HELD_OUT_FAMILIES = (
     *("composite", "grooved", "plates", "fixtures", "housings", "manifolds", "castings"),
-    "wheels",
+    *("wheels", "links"),
 )
 """Never drawn for training: the frozen generalisation sets' families."""

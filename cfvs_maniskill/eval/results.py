@@ -113,6 +113,7 @@ FROZEN_RESULTS = (
     "results/generalisation_manifolds",
     "results/generalisation_castings",
     "results/generalisation_wheels",
+    "results/generalisation_links",
 )
 """The results folders of the frozen sets (assets/final, assets/generalisation*), relative
 to the checkout: each record there is what its release's one run wrote, never re-run."""

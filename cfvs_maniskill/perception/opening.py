@@ -103,8 +103,8 @@ def fit_opening(
     depth = level - q[:, 2]
     q = q[(r < half + SEARCH + REACH) & (depth > -REACH) & (depth < WALL_DEPTH)]
     scale = max(SCALE, NOISE_SCALE * spread)
-    start = _start(q, half, round_opening, level)
-    free = np.delete(start, 2) if round_opening else start  # a circle has no yaw
+    start = _start(q, half, round_opening, level, scale)
+    free = np.delete(start, 2) if round_opening else start  # a circle has no yaw (_model)
     lower = np.full(len(free), -np.inf)
     upper = np.full(len(free), np.inf)
     lower[-1], upper[-1] = 0.0, MAX_INSET
@@ -117,7 +117,7 @@ def fit_opening(
         f_scale=scale,
         x_scale=0.001,
     ).x
-    p = np.insert(fit, 2, 0.0) if round_opening else fit
+    p = _model(fit, round_opening)
     (cx, cy), yaw = p[:2], p[2]
     if not _opening_seen(q, p, half, round_opening, scale):
         return None
@@ -137,7 +137,7 @@ def _opening_seen(
     it near its outline (the face's edge, the walls' tops), and fewer at the face's level
     well inside the outline (a face where the model has its opening) than there."""
     out = _outside(q, p, half, round_opening)
-    near = model_distance(q, p, half, round_opening) < scale
+    near = model_distance(q, p, half, round_opening, out) < scale
     edge = np.count_nonzero(near & (np.abs(out + p[4]) < EDGE_NEAR))
     inside = np.count_nonzero((out < -EDGE_NEAR) & (np.abs(q[:, 2] - p[3]) < scale))
     return edge >= MIN_EDGE_POINTS and inside < edge
@@ -145,45 +145,50 @@ def _opening_seen(
 
 def _outside(q: np.ndarray, p: np.ndarray, half: float, round_opening: bool) -> np.ndarray:
     """How far each point lies outside the outline of the opening model `p` (centre x, y,
-    yaw, ...), in the face's plane; negative inside."""
-    x, y = q[:, 0] - p[0], q[:, 1] - p[1]
+    yaw, ...; or models, (..., 5)), in the face's plane; negative inside. (..., n)."""
+    x, y = q[:, 0] - p[..., 0, None], q[:, 1] - p[..., 1, None]
     if not round_opening:
-        c, s = np.cos(p[2]), np.sin(p[2])
+        c, s = np.cos(p[..., 2, None]), np.sin(p[..., 2, None])
         x, y = c * x + s * y, c * y - s * x
-    return nominal_distance(np.column_stack([x, y]), round_opening) - half
+    return nominal_distance(np.stack([x, y], axis=-1), round_opening) - half
 
 
-def model_distance(q: np.ndarray, p: np.ndarray, half: float, round_opening: bool) -> np.ndarray:
+def model_distance(
+    q: np.ndarray, p: np.ndarray, half: float, round_opening: bool, out: np.ndarray | None = None
+) -> np.ndarray:
     """Each point's distance to the opening model `p` (centre x, y, yaw, face level, walls'
-    inset; in the estimate's frame): the face outside the outline, the walls inside."""
-    out = _outside(q, p, half, round_opening)
-    z = q[:, 2] - p[3]
+    inset; in the estimate's frame; or models, (..., 5)): the face outside the outline, the
+    walls inside. `out`: `_outside` of the same, where already known."""
+    if out is None:
+        out = _outside(q, p, half, round_opening)
+    z = q[:, 2] - p[..., 3, None]
     face = np.where(out >= 0.0, np.abs(z), np.hypot(out, z))
-    w = out + p[4]
+    w = out + p[..., 4, None]
     wall = np.where(z <= 0.0, np.abs(w), np.hypot(w, z))
     return np.minimum(face, wall)
 
 
+def _model(free: np.ndarray, round_opening: bool) -> np.ndarray:
+    """The model (centre x, y, yaw, face level, walls' inset) of the fitted unknowns: a
+    circle has no yaw."""
+    return np.insert(free, 2, 0.0) if round_opening else free
+
+
 def _residuals(free: np.ndarray, q: np.ndarray, half: float, round_opening: bool) -> np.ndarray:
-    p = np.insert(free, 2, 0.0) if round_opening else free
+    p = _model(free, round_opening)
     d = model_distance(q, p, half, round_opening)
     return np.append(d, INSET_PRIOR * np.sqrt(len(q)) * p[4])
 
 
-def _start(q: np.ndarray, half: float, round_opening: bool, level: float) -> np.ndarray:
-    """The grid's best model (face at `level`, walls not inset) by truncated squares."""
+def _start(q: np.ndarray, half: float, round_opening: bool, level: float, scale: float):
+    """The grid's best model (face at `level`, walls not inset) by squares truncated at two
+    loss scales `scale` (a far point costs what the least squares' loss makes it cost)."""
     g = np.arange(-SEARCH, SEARCH + 1e-9, GRID)
     turns = [0.0] if round_opening else np.radians(GRID_TURN_DEG)
-    best, best_cost = None, np.inf
-    for yaw in turns:
-        for cx in g:
-            for cy in g:
-                p = np.array([cx, cy, yaw, level, 0.0])
-                d = model_distance(q, p, half, round_opening)
-                cost = np.square(np.minimum(d, 2 * SCALE)).sum()
-                if cost < best_cost:
-                    best, best_cost = p, cost
-    return best
+    yaw, cx, cy = (a.ravel() for a in np.meshgrid(turns, g, g, indexing="ij"))
+    grid = np.column_stack([cx, cy, yaw, np.full(len(cx), level), np.zeros(len(cx))])
+    cost = np.square(np.minimum(model_distance(q, grid, half, round_opening), 2 * scale))
+    return grid[int(np.argmin(cost.sum(axis=1)))]
 
 
 def face_height(

@@ -69,6 +69,7 @@ import numpy as np
 import trimesh
 
 from cfvs_maniskill.constants import MIN_WALL, hole_half_extent
+from cfvs_maniskill.objects import build
 
 Draw = Callable[[np.random.Generator, str, float, Path, str], "tuple[dict, dict] | None"]
 
@@ -941,18 +942,13 @@ centre (or, one in three, anywhere on the face), with two or three of `WHEEL_FEA
 standing on or cut from the rest)."""
 
 
-def _to_manifold(mesh: trimesh.Trimesh) -> mf.Manifold:
-    return mf.Manifold(
-        mf.Mesh(
-            vert_properties=np.asarray(mesh.vertices, np.float32),
-            tri_verts=np.asarray(mesh.faces, np.uint32),
-        )
-    )
+def _solid(mesh: trimesh.Trimesh) -> mf.Manifold:
+    return build._to_manifold(mesh.vertices, mesh.faces)
 
 
-def _from_manifold(solid: mf.Manifold) -> trimesh.Trimesh:
-    out = solid.simplify(1e-6).to_mesh()  # no sliver an STL round trip would fold shut
-    return trimesh.Trimesh(out.vert_properties[:, :3], out.tri_verts)
+def _mesh(solid: mf.Manifold) -> trimesh.Trimesh:
+    # simplified: no sliver an STL round trip would fold shut
+    return trimesh.Trimesh(*build._from_manifold(solid.simplify(1e-6)))
 
 
 def _extruded(region: mf.CrossSection, z0: float, z1: float) -> mf.Manifold:
@@ -962,12 +958,12 @@ def _extruded(region: mf.CrossSection, z0: float, z1: float) -> mf.Manifold:
 
 def _cut(mesh: trimesh.Trimesh, region: mf.CrossSection, z0: float, z1: float):
     """`mesh` less `region` (a plan) between heights `z0` and `z1` (m)."""
-    return _from_manifold(_to_manifold(mesh) - _extruded(region, z0, z1))
+    return _mesh(_solid(mesh) - _extruded(region, z0, z1))
 
 
 def _plan(mesh: trimesh.Trimesh, z: float) -> mf.CrossSection:
     """The body's section at height `z` (m), as seen from above."""
-    return _to_manifold(mesh).slice(z)
+    return _solid(mesh).slice(z)
 
 
 def _disc(centre, r: float, sides: int = 64) -> mf.CrossSection:
@@ -999,7 +995,7 @@ def _link(rng, keep: float, top: float, across: tuple[float, float]):
         r_end = rng.uniform(max(keep + 0.003, 0.6 * pivot), pivot)
         ends.append(_unit(a) * rng.uniform(*across))
         plan = plan + mf.CrossSection.batch_hull([_disc([0, 0], pivot), _disc(ends[-1], r_end)])
-    mesh = _from_manifold(_extruded(plan, 0.0, top))
+    mesh = _mesh(_extruded(plan, 0.0, top))
     return mesh, (np.zeros(2) if rng.random() < 2 / 3 else ends[int(rng.integers(n))])
 
 
@@ -1087,9 +1083,10 @@ link_body = _part(
     last=(add_knurl, add_radial_slot, add_far_bores, add_boss),
     base=_link,
 )
-"""A link, lever or bellcrank 5-7.5 cm thick (the opening's 48 mm need it), up to 30 cm across (arms 5-13 cm long), the opening at the
-pivot or an arm's end, with two or three of `LINK_FEATURES` (the I-section first; the
-knurl, the slot and the far bores cut what it leaves; a boss on top last)."""
+"""A link, lever or bellcrank 5-7.5 cm thick (the opening's 48 mm need it), up to 30 cm
+across (arms 5-13 cm long), the opening at the pivot or an arm's end, with two or three of
+`LINK_FEATURES` (the I-section first; the knurl, the slot and the far bores cut what it
+leaves; a boss on top last)."""
 
 
 FAMILIES: dict[str, Draw] = {

@@ -51,8 +51,8 @@ Each family draws one mesh body with a hole frame, like `procedural._featured_bo
 - `links`: links, levers and bellcranks up to 30 cm across, one to three arms from a pivot
   boss, the opening at the pivot or an arm's end, with two or three of: the arms' web
   recessed inside flanges (an I-section), a knurled pad round the opening, a slot through
-  the part aimed at it, bores through the arms' other ends, a boss lifting the opening. Held out: release
-  1.6.0's frozen set (`assets/generalisation_links/`) is made of it.
+  the part aimed at it, bores through the arms' other ends, a boss lifting the opening.
+  Held out: release 1.6.0's frozen set (`assets/generalisation_links/`) is made of it.
 
 Sizes keep the hole's full wall: everything stays `keep` (the opening's circumscribed
 radius plus `MIN_WALL`) away from the hole's axis.
@@ -967,12 +967,13 @@ def _plan(mesh: trimesh.Trimesh, z: float) -> mf.CrossSection:
 
 
 def _disc(centre, r: float, sides: int = 64) -> mf.CrossSection:
+    """A disc of radius `r` (m) at `centre` (x, y), as a polygon of `sides` sides."""
     return mf.CrossSection.circle(r, sides).translate(list(map(float, centre)))
 
 
 def _inside(region: mf.CrossSection, points: np.ndarray) -> np.ndarray:
     """Which of `points` (N x 2) lie in `region` (even-odd over its contours)."""
-    from matplotlib.path import Path as Outline
+    from matplotlib.path import Path as Outline  # only the families that cut plans need it
 
     count = np.zeros(len(points), int)
     for loop in region.to_polygons():
@@ -1048,18 +1049,15 @@ def add_far_bores(rng, mesh, hole, top, keep):
     half = keep - MIN_WALL
     cuts = []
     for _ in range(int(rng.integers(1, 3))):
-        widest, square, edge = (
-            half * rng.uniform(0.5, 2),
-            rng.random() < 0.4,
-            rng.uniform(0.003, 0.01),
-        )
-        (x0, y0), (x1, y1) = mesh.bounds[0, :2], mesh.bounds[1, :2]
+        widest = half * rng.uniform(0.5, 2)
+        square, edge = rng.random() < 0.4, rng.uniform(0.003, 0.01)
         for r in [s for s in widest * 0.8 ** np.arange(8) if s >= 0.5 * half]:  # one with room
             wall = r * (np.sqrt(2) if square else 1.0) + edge
             room = _plan(mesh, 0.0005).offset(-wall, mf.JoinType.Round)
             room = room - _disc(hole, keep + 0.04)
             for cut in cuts:
                 room = room - cut.offset(wall, mf.JoinType.Round)
+            (x0, y0), (x1, y1) = mesh.bounds[0, :2], mesh.bounds[1, :2]
             seen = np.c_[rng.uniform(x0, x1, 400), rng.uniform(y0, y1, 400)]
             seen = seen[_inside(room, seen)]
             if len(seen):

@@ -182,7 +182,7 @@ def _residuals(free: np.ndarray, q: np.ndarray, half: float, round_opening: bool
 
 def _start(q: np.ndarray, half: float, round_opening: bool, level: float, scale: float):
     """The grid's best model (face at `level`, walls not inset) by squares truncated at two
-    loss scales `scale` (a far point costs what the least squares' loss makes it cost)."""
+    loss scales `scale`: a far point weighs no more than it will in the least squares."""
     g = np.arange(-SEARCH, SEARCH + 1e-9, GRID)
     turns = [0.0] if round_opening else np.radians(GRID_TURN_DEG)
     yaw, cx, cy = (a.ravel() for a in np.meshgrid(turns, g, g, indexing="ij"))

@@ -1047,17 +1047,17 @@ def add_far_bores(rng, mesh, hole, top, keep):
     width, narrower where the part is) 4 cm or more from it with a wall 3-10 mm round them:
     a link's other ends."""
     half = keep - MIN_WALL
+    footprint = _plan(mesh, 0.0005)
+    (x0, y0), (x1, y1) = mesh.bounds[0, :2], mesh.bounds[1, :2]
     cuts = []
     for _ in range(int(rng.integers(1, 3))):
         widest = half * rng.uniform(0.5, 2)
         square, edge = rng.random() < 0.4, rng.uniform(0.003, 0.01)
         for r in [s for s in widest * 0.8 ** np.arange(8) if s >= 0.5 * half]:  # one with room
             wall = r * (np.sqrt(2) if square else 1.0) + edge
-            room = _plan(mesh, 0.0005).offset(-wall, mf.JoinType.Round)
-            room = room - _disc(hole, keep + 0.04)
+            room = footprint.offset(-wall, mf.JoinType.Round) - _disc(hole, keep + 0.04)
             for cut in cuts:
                 room = room - cut.offset(wall, mf.JoinType.Round)
-            (x0, y0), (x1, y1) = mesh.bounds[0, :2], mesh.bounds[1, :2]
             seen = np.c_[rng.uniform(x0, x1, 400), rng.uniform(y0, y1, 400)]
             seen = seen[_inside(room, seen)]
             if len(seen):

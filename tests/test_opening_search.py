@@ -1,13 +1,15 @@
 """The nominal opening searched for round a coarse estimate (perception/opening_search.py)
 and the fine look's check that it shows the opening (perception/view.py): on synthetic
-coarse views of a plate, dense and sparse, with a wall, a second opening and none."""
+coarse views of a plate, dense and sparse, with a wall, a second opening and none; and the
+fine stage's fit reaching as far as the search (`locate_opening`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cfvs_maniskill.perception.opening_search import RADIUS, search_opening
+from cfvs_maniskill.perception.opening import fit_opening
+from cfvs_maniskill.perception.opening_search import RADIUS, locate_opening, search_opening
 from cfvs_maniskill.perception.view import points_at_opening
 
 HALF = 0.025  # the 4 mm tasks' square hole and round hole radius
@@ -94,3 +96,22 @@ def test_a_view_of_a_walls_back_shows_no_points_at_the_opening():
     corner = np.array([[HALF + 0.008, HALF + 0.008, 0.0]])
     assert points_at_opening(corner, H, HALF) == 1
     assert points_at_opening(corner, H, HALF, round_opening=True) == 0
+
+
+@pytest.mark.parametrize("round_opening", [False, True])
+def test_an_opening_beyond_the_fits_reach_is_searched_for_then_fitted(round_opening):
+    """OPN's estimate 15-25 mm off: beyond the few millimetres the fit looks over, within
+    the search's radius; the opening is fitted where the search puts it, to the fit's
+    precision, and near the estimate the fit alone answers."""
+    rng = np.random.default_rng(4)
+    pts = _plate(rng, round_opening=round_opening, wall=0.02, noise=0.0003)
+    for start in [(0.015, -0.01), (-0.02, 0.012), (0.0, 0.025)]:
+        off = _estimate(*start)
+        assert fit_opening(pts, off, HALF, round_opening) is None, start
+        F = locate_opening(pts, off, HALF, round_opening)
+        assert F is not None and np.linalg.norm(F[:2, 3]) < 0.0007, (start, F)
+        assert abs(F[2, 3]) < 0.001, (start, F[:3, 3])
+    near = _estimate(0.002, -0.001)
+    F = locate_opening(pts, near, HALF, round_opening)
+    assert np.allclose(F, fit_opening(pts, near, HALF, round_opening))
+    assert locate_opening(_plate(rng, openings=()), near, HALF, round_opening) is None

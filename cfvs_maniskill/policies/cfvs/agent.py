@@ -41,8 +41,8 @@ from cfvs_maniskill.perception.clouds import (
     valid_world_points,
     world_object_points,
 )
-from cfvs_maniskill.perception.opening import face_height, fit_opening
-from cfvs_maniskill.perception.opening_search import search_opening
+from cfvs_maniskill.perception.opening import face_height
+from cfvs_maniskill.perception.opening_search import locate_opening, search_opening
 from cfvs_maniskill.perception.peg import apply as apply_correction
 from cfvs_maniskill.perception.peg import peg_correction
 from cfvs_maniskill.perception.rim import align_axis, rim_normal
@@ -223,7 +223,7 @@ class CFVSAgent(Agent):
             H, where = (align_axis(H, n), "axis from the rim") if axis_seen else (H, "OPN axis")
         if self.cfg.opening_fit:
             world = self.sightings.cloud(world)
-            seen = fit_opening(world, H, self.half, round_opening=self.round_opening)
+            seen = locate_opening(world, H, self.half, round_opening=self.round_opening)
             where += ", OPN position" if seen is None else ", centre from the opening"
             H = H if seen is None else seen
             level, _ = face_height(world, H, self.half, round_opening=self.round_opening)

@@ -52,11 +52,12 @@ class CFVSConfig:
     opening searched for within 4 cm of it (perception/opening_search.py), when one place
     stands out. Fine: at the level of the face just outside it (walls and flanges beside
     the opening pull OPN's height up), centred on its edge and walls (a square's sides, a
-    round hole's circle), a square turned onto its walls (perception/opening.py). Each fine
-    look is one measurement of a hole that does not move: the opening is fitted to the
-    points of the last `sightings.LOOKS` looks, and the hole's position is the weighted
-    mean of every look's (policies/cfvs/sightings.py). False: OAKN's and OPN's positions
-    and yaw, each look on its own."""
+    round hole's circle), a square turned onto its walls (perception/opening.py), searched
+    for as in the coarse stage where OPN's estimate is not near it. Each fine look is one
+    measurement of a hole that does not move: the opening is fitted to the points of the
+    last `sightings.LOOKS` looks, and the hole's position is the weighted mean of every
+    look's (policies/cfvs/sightings.py). False: OAKN's and OPN's positions and yaw, each
+    look on its own."""
     clear_view: bool = True
     """4- and 6-DoF square holes: of the four equivalent approach yaws, take the one
     nearest the tool's own whose camera has a clear line of sight to the opening from the

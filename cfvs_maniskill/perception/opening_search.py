@@ -119,8 +119,8 @@ def locate_opening(
     """The opening fitted on its face near hole frame `frame` (perception/opening.py) or,
     where no fit is found there, searched for within RADIUS of it and fitted where the
     search puts it; None when neither finds it. The fit reaches a few millimetres: on the
-    development bodies, fine looks that fitted no opening three times in a row were OPN's
-    estimates 1-5 cm off, and none of those episodes inserted."""
+    `manifolds` development bodies, where three fine looks in a row fitted no opening, OPN's
+    estimate was 1-5 cm off and none of those episodes inserted."""
     found = fit_opening(points, frame, half, round_opening)
     if found is None and (near := search_opening(points, frame, half, round_opening)) is not None:
         found = fit_opening(points, near, half, round_opening)

@@ -162,7 +162,12 @@ def test_records_carry_the_true_residual_after_each_move(make_env, tmp_path):
     assert lateral_mm < 1.0 and tilt_deg < 0.5
     rec = {**r.to_json(), "label": "oracle"}
     text = residuals.table([rec, {**rec, "sensor": "realistic", "move_residuals": [[3.0, 2.0]]}])
-    assert "| PegInsert6DoF | oracle | realistic | 1 | 1 | 3.0 / 3.0 | 2.0 / 2.0 |" in text
+    assert "| PegInsert6DoF | oracle | realistic | 1 | 1 | 3.00 / 3.00 | 2.00 / 2.00 |" in text
+    # After the last move, whichever it was: where the insertion starts from.
+    two = {**rec, "sensor": "d435", "move_residuals": [[9.0, 1.0], [0.5, 0.25]]}
+    rows = [x for x in residuals.table([two]).splitlines() if "| d435 |" in x]
+    assert rows[-1] == "| PegInsert6DoF | oracle | d435 | last | 1 | 0.50 / 0.50 | 0.25 / 0.25 |"
+    assert [x.split(" | ")[3] for x in rows] == ["1", "2", "last"]
     # The realistic profile's hand-eye floor is quoted beside it (sensing/floor.py), trusting
     # the calibration and calibrated on the table; the ideal profile (no errors) has none.
     assert "hand-eye floor" in text and "`ideal`" not in text

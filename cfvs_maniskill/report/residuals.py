@@ -1,5 +1,6 @@
 """The closed-loop residual: how far the peg is from the true pre-insertion pose after each
-of an agent's moves (records' `move_residuals`), per move, per sensor profile."""
+of an agent's moves (records' `move_residuals`), per move, per sensor profile, and after its
+last move: where the insertion starts from."""
 
 from __future__ import annotations
 
@@ -16,17 +17,23 @@ MAX_MOVES = 9
 """Moves shown (CFVS: 1 coarse + up to 8 fine)."""
 
 
-def _by_move(records: list[dict]) -> dict[tuple, list[list[float]]]:
+def _by_move(records: list[dict], last: bool = False) -> dict[tuple, list[list[float]]]:
+    """Residuals per (task, agent, sensor, move); with `last`, also move "last" (each
+    episode's last move, whichever number it had)."""
     cells: dict[tuple, list[list[float]]] = defaultdict(list)
     for r in records:
-        for k, res in enumerate(r.get("move_residuals", [])[:MAX_MOVES], start=1):
+        moves = r.get("move_residuals", [])
+        for k, res in enumerate(moves[:MAX_MOVES], start=1):
             cells[(r["task"], r["label"], r["sensor"], k)].append(res)
+        if last and moves:
+            cells[(r["task"], r["label"], r["sensor"], "last")].append(moves[-1])
     return cells
 
 
 def table(records: list[dict]) -> str:
-    """Per task, agent, sensor and move: lateral and tilt error, median and p90."""
-    cells = _by_move(records)
+    """Per task, agent, sensor and move (then after the last move, before the insertion):
+    lateral and tilt error, median and p90."""
+    cells = _by_move(records, last=True)
     if not cells:
         return "No records with move residuals (recorded since the residuals were added)."
     out = [
@@ -34,12 +41,12 @@ def table(records: list[dict]) -> str:
         "tilt deg, median / p90 |",
         "|---|---|---|---|---|---|---|",
     ]
-    for (task, label, sensor, k), res in sorted(cells.items()):
+    for (task, label, sensor, k), res in sorted(cells.items(), key=_move_order):
         a = np.asarray(res)
         lat, tilt = np.percentile(a[:, 0], [50, 90]), np.percentile(a[:, 1], [50, 90])
         out.append(
-            f"| {task} | {label} | {sensor} | {k} | {len(a)} | {lat[0]:.1f} / {lat[1]:.1f} | "
-            f"{tilt[0]:.1f} / {tilt[1]:.1f} |"
+            f"| {task} | {label} | {sensor} | {k} | {len(a)} | {lat[0]:.2f} / {lat[1]:.2f} | "
+            f"{tilt[0]:.2f} / {tilt[1]:.2f} |"
         )
     notes = []
     for s in sorted({s for _, _, s, _ in cells}):
@@ -54,6 +61,11 @@ def table(records: list[dict]) -> str:
             "cfvs_maniskill.sensing.floor`): " + ", ".join(notes) + "."
         )
     return "\n".join(out)
+
+
+def _move_order(item: tuple) -> tuple:
+    (task, label, sensor, k), _ = item
+    return task, label, sensor, MAX_MOVES + 1 if k == "last" else k
 
 
 def plot(records: list[dict], out: Path, agent: str = "cfvs") -> Path | None:

@@ -254,6 +254,58 @@ def test_a_blind_fine_look_looks_again_from_further_back_then_from_each_other_ya
     assert len(blind_looks(three)) == 2
 
 
+def _box_on_table(H: np.ndarray, half: float, opening: bool) -> dict:
+    """A pointcloud observation of the table (z = 0) and a 16 cm box whose top face holds
+    hole frame `H`'s origin, with the square opening (its floor 3 cm down) or plain."""
+    rng = np.random.default_rng(0)
+    table = np.column_stack([rng.uniform(-0.25, 0.25, (40000, 2)), np.zeros(40000)])
+    top = rng.uniform(-0.08, 0.08, (12000, 2))
+    z = np.where(np.abs(top).max(axis=1) < half, -0.03, 0.0) if opening else np.zeros(len(top))
+    face = np.column_stack([top, z])
+    pts = np.vstack([table + [H[0, 3], H[1, 3], 0.0], face @ H[:3, :3].T + H[:3, 3]])
+    xyzw = np.column_stack([pts, np.ones(len(pts))]).astype(np.float32)
+    return {"pointcloud": {"xyzw": torch.from_numpy(xyzw)[None]}}
+
+
+@pytest.mark.parametrize("opening", [False, True])
+def test_fine_looks_that_fit_no_opening_count_as_a_look_that_sees_nothing(opening):
+    """OPN 6 mm off at every look over a face that shows no opening: the UNFITTED_LOOKS-th
+    look moves RISE further back over the estimate, as a blind look does, and as many more
+    turn the wrist; over the opening the fit holds every look and the peg goes in."""
+    from cfvs_maniskill.constants import PRE_INSERT_HEIGHT
+    from cfvs_maniskill.envs.task_config import load_task
+    from cfvs_maniskill.policies.base import Observation
+    from cfvs_maniskill.policies.cfvs.agent import RISE, UNFITTED_LOOKS
+    from cfvs_maniskill.policies.interface import insertion_pose
+
+    agent = CFVSAgent(TaskSpec.of(load_task(resources.bundled("tasks") / "PegInsert4DoF.yaml")))
+    agent.reset(0)
+    agent.predict_offset = lambda crop: np.array([0.006, 0.0, 0.0, 0.0, 0.0, 0.0])
+    H = np.eye(4)
+    H[:3, 3] = (0.5, 0.0, 0.08)
+    obs = _box_on_table(H, agent.half, opening)
+    agent.stage, agent.estimate = "fine", H
+    tcp = insertion_pose("square", H, -PRE_INSERT_HEIGHT, np.diag([1.0, -1.0, -1.0, 1.0]))
+    phases = []
+    while (a := agent.act(Observation(obs, tcp))).kind == "move":
+        phases.append(agent.phase)
+        if "looking again" in agent.phase:
+            back = insertion_pose("square", agent.estimate, -PRE_INSERT_HEIGHT - RISE, tcp)
+            assert np.allclose(a.pose, back, atol=1e-9)
+        if "turned" in agent.phase:
+            assert abs(a.pose[:3, 0] @ tcp[:3, 0]) < 1e-6  # a square's next yaw, 90 deg on
+        tcp = a.pose
+    if opening:
+        assert not any("no opening fitted" in p for p in phases), phases
+        assert abs(tcp[0, 3] - 0.5) < 0.001 and abs(tcp[1, 3]) < 0.001  # over the opening
+        return
+    why = f"fine: no opening fitted in {UNFITTED_LOOKS} looks"
+    assert len(phases) >= 2 * UNFITTED_LOOKS, phases  # else it inserted at the estimate
+    assert phases[UNFITTED_LOOKS - 1] == f"{why}, looking again {RISE * 1000:.0f} mm back"
+    assert phases[2 * UNFITTED_LOOKS - 1] == f"{why}, the wrist turned", phases
+    assert all(p.startswith("fine iteration") for p in phases[: UNFITTED_LOOKS - 1]), phases
+
+
 def test_a_coarse_estimate_from_far_is_looked_at_again_from_nearer(make_env):
     """From 30 cm OAKN's estimate is taken again from NEAR_VIEW: the peg moves onto the
     line from the estimate to its tip, aimed at it; the second look goes on to the

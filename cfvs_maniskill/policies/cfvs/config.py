@@ -72,7 +72,8 @@ class CFVSConfig:
     between the camera and the opening: agent.MIN_AT_OPENING) or three in a row fit no
     opening (agent.UNFITTED_LOOKS), look again from another view of the same estimate:
     2 cm further back, then (a square in 4/6-DoF) turned about the hole's axis, which
-    puts the camera on another side of the opening, up to three turns. When no view shows it, insert at the estimate. False: insert there at once."""
+    puts the camera on another side of the opening, up to three turns. When no view shows
+    it, insert at the estimate. False: insert there at once."""
     calibration: bool = True
     """Correct the camera from what the robot knows is in view, measured on the coarse view
     and applied to every view of the episode: the table plane, at a known height, gives the
